@@ -1,0 +1,52 @@
+// The path config of ../shared/SPEC.md ("Path config"): robot, path, simulation settings.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "odomcov/path.hpp"
+
+namespace YAML {
+class Node;
+}
+
+namespace odomcov {
+
+/// Bounds that reject absurd requests before any work starts.
+inline constexpr std::int64_t kMaxRuns = 1'000'000'000;
+inline constexpr std::int64_t kMaxSamplesPerRun = 100'000'000;
+/// runs x samples per run; 1e12 steps is about an hour and a half on two cores.
+inline constexpr double kMaxSimulationSteps = 1e12;
+
+struct SimulationSettings {
+  std::int64_t runs = 10'000;
+  std::uint64_t seed = 1;
+};
+
+struct Config {
+  std::string file;  // where it was read from, for messages
+  std::string name;  // defaults to the file's stem
+  Robot robot;
+  Path path;
+  SimulationSettings simulation;
+};
+
+/// Reads and validates a path config. Throws InputError (file:line: key: what) on bad input.
+Config load_config(const std::string& file);
+
+/// Validates an already-parsed YAML tree (used by `sweep`, which edits keys before parsing).
+Config parse_config(const YAML::Node& root, const std::string& file);
+
+/// Parses the `path` block (sample_rate plus keyframes or segments), shared with measurement
+/// suites. `key` is the block's dotted key path for messages.
+Path parse_path(const YAML::Node& node, const std::string& file, const std::string& key,
+                double wheelbase_m);
+
+/// Parses a `robot` block {wheelbase, k_left, k_right}.
+Robot parse_robot(const YAML::Node& node, const std::string& file, const std::string& key);
+
+/// Rejects a runs count outside [1, kMaxRuns] or a job above kMaxSimulationSteps.
+void check_simulation_size(const std::string& file, int line, const std::string& key,
+                           std::int64_t runs, std::int64_t samples_per_run);
+
+}  // namespace odomcov

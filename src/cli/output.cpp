@@ -1,0 +1,93 @@
+#include "output.hpp"
+
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace odomcov::cli {
+
+json to_json(const Vector3& v) { return json::array({v.x(), v.y(), v.z()}); }
+
+json to_json(const Matrix3& m) {
+  json rows = json::array();
+  for (int i = 0; i < 3; ++i) rows.push_back(json::array({m(i, 0), m(i, 1), m(i, 2)}));
+  return rows;
+}
+
+std::string sci(double value, int precision) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*e", precision, value);
+  return buf;
+}
+
+std::string fixed(double value, int precision) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", precision, value);
+  return buf;
+}
+
+std::string matrix_rows(const Matrix3& m, const std::string& indent, int precision) {
+  std::ostringstream out;
+  const int width = precision + 8;
+  for (int i = 0; i < 3; ++i) {
+    out << indent;
+    for (int j = 0; j < 3; ++j) {
+      const std::string cell = sci(m(i, j), precision);
+      out << std::string(static_cast<std::size_t>(std::max(1, width - static_cast<int>(cell.size()))), ' ')
+          << cell;
+    }
+    out << '\n';
+  }
+  return out.str();
+}
+
+Matrix3 std_corr_matrix(const Matrix3& cov) {
+  Matrix3 out;
+  const Vector3 sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      out(i, j) = i == j ? sd(i) : (sd(i) > 0 && sd(j) > 0 ? cov(i, j) / (sd(i) * sd(j)) : 0.0);
+    }
+  }
+  return out;
+}
+
+void check_output_path(const std::string& path) {
+  namespace fs = std::filesystem;
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  if (!fs::is_directory(dir)) throw UsageError(path + ": directory " + dir.string() + " does not exist");
+  if (::access(dir.c_str(), W_OK) != 0) throw UsageError(path + ": directory is not writable");
+  if (fs::is_directory(path)) throw UsageError(path + ": is a directory");
+}
+
+void write_file_atomic(const std::string& path, const std::string& text) {
+  namespace fs = std::filesystem;
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    out << text;
+    out.flush();
+    if (!out) {
+      std::error_code ec;
+      fs::remove(tmp, ec);
+      throw std::runtime_error("cannot write " + path);
+    }
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw std::runtime_error("cannot write " + path);
+  }
+}
+
+void write_json_atomic(const std::string& path, const json& value) {
+  write_file_atomic(path, value.dump(2) + "\n");
+}
+
+}  // namespace odomcov::cli

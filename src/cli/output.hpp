@@ -1,0 +1,41 @@
+// Output helpers shared by the subcommands: number and matrix formatting, JSON blocks, and
+// writing files atomically (a file is either complete or not there).
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+
+#include "odomcov/closed_form.hpp"
+
+namespace odomcov::cli {
+
+using nlohmann::json;
+
+json to_json(const Vector3& v);
+json to_json(const Matrix3& m);
+
+/// "%.4e"-style scientific, or fixed with `precision` decimals.
+std::string sci(double value, int precision = 4);
+std::string fixed(double value, int precision);
+
+/// Rows of a 3x3 matrix, each prefixed with `indent`, columns right-aligned.
+std::string matrix_rows(const Matrix3& m, const std::string& indent, int precision = 4);
+
+/// Standard deviations on the diagonal, correlation coefficients off it ([Kleeman95] §7).
+Matrix3 std_corr_matrix(const Matrix3& cov);
+
+/// Fails with a usage error (exit 2) unless the output's directory exists and is writable;
+/// called before any work starts.
+void check_output_path(const std::string& path);
+
+/// Writes `text` to `path` via a temporary file and rename.
+void write_file_atomic(const std::string& path, const std::string& text);
+void write_json_atomic(const std::string& path, const json& value);
+
+/// A usage error: reported as one line, exit code 2.
+struct UsageError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace odomcov::cli

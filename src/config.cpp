@@ -1,0 +1,169 @@
+#include "odomcov/config.hpp"
+
+#include <cmath>
+#include <filesystem>
+
+#include "yaml_util.hpp"
+
+namespace odomcov {
+namespace {
+
+using yaml::Where;
+
+constexpr double kDefaultSpeedMps = 0.5;
+constexpr double kDegToRad = M_PI / 180.0;
+
+std::vector<Keyframe> parse_keyframes(const Where& where, const YAML::Node& node) {
+  yaml::require_sequence(where, node);
+  std::vector<Keyframe> keyframes;
+  for (std::size_t i = 0; i < node.size(); ++i) {
+    const Where row_where = where.index(i);
+    const YAML::Node row = node[i];
+    if (!row.IsSequence() || row.size() != 3) {
+      yaml::fail(row_where, row, "expected [time s, left m, right m]");
+    }
+    Keyframe k{yaml::to_number(row_where, row[0]), yaml::to_number(row_where, row[1]),
+               yaml::to_number(row_where, row[2])};
+    if (i == 0 && (k.t_s != 0.0 || k.left_m != 0.0 || k.right_m != 0.0)) {
+      yaml::fail(row_where, row, "the first keyframe must be [0, 0, 0]");
+    }
+    if (i > 0 && !(k.t_s > keyframes.back().t_s)) {
+      yaml::fail(row_where, row, "time must increase strictly (previous " +
+                                     std::to_string(keyframes.back().t_s) + " s)");
+    }
+    keyframes.push_back(k);
+  }
+  if (keyframes.size() < 2) yaml::fail(where, node, "need at least two keyframes");
+  return keyframes;
+}
+
+PathSegment parse_segment(const Where& where, const YAML::Node& node) {
+  if (!node.IsMap() || node.size() != 1) {
+    yaml::fail(where, node, "expected one of {line: m}, {turn_deg: deg}, {arc: {radius, angle_deg}}");
+  }
+  yaml::require_map(where, node, {"line", "turn_deg", "arc"});
+  PathSegment segment;
+  if (node["line"]) {
+    segment.kind = PathSegment::Kind::line;
+    segment.distance_m = yaml::require_number(where, node, "line");
+    if (segment.distance_m == 0.0) yaml::fail(where.child("line"), node["line"], "must not be 0");
+  } else if (node["turn_deg"]) {
+    segment.kind = PathSegment::Kind::turn;
+    segment.angle_rad = yaml::require_number(where, node, "turn_deg") * kDegToRad;
+    if (segment.angle_rad == 0.0) {
+      yaml::fail(where.child("turn_deg"), node["turn_deg"], "must not be 0");
+    }
+  } else {
+    const Where arc_where = where.child("arc");
+    const YAML::Node arc = node["arc"];
+    yaml::require_map(arc_where, arc, {"radius", "angle_deg"});
+    segment.kind = PathSegment::Kind::arc;
+    segment.radius_m = yaml::require_number(arc_where, arc, "radius");
+    segment.angle_rad = yaml::require_number(arc_where, arc, "angle_deg") * kDegToRad;
+    if (segment.angle_rad == 0.0) {
+      yaml::fail(arc_where.child("angle_deg"), arc["angle_deg"], "must not be 0");
+    }
+  }
+  return segment;
+}
+
+}  // namespace
+
+Robot parse_robot(const YAML::Node& node, const std::string& file, const std::string& key) {
+  const Where where{file, key};
+  yaml::require_map(where, node, {"wheelbase", "k_left", "k_right"});
+  Robot robot;
+  robot.wheelbase_m = yaml::require_number(where, node, "wheelbase");
+  if (!(robot.wheelbase_m > 0.0)) {
+    yaml::fail(where.child("wheelbase"), node["wheelbase"], "must be > 0 m");
+  }
+  robot.noise.k_left = yaml::require_number(where, node, "k_left");
+  robot.noise.k_right = yaml::require_number(where, node, "k_right");
+  if (robot.noise.k_left < 0.0) yaml::fail(where.child("k_left"), node["k_left"], "must be >= 0");
+  if (robot.noise.k_right < 0.0) {
+    yaml::fail(where.child("k_right"), node["k_right"], "must be >= 0");
+  }
+  return robot;
+}
+
+Path parse_path(const YAML::Node& node, const std::string& file, const std::string& key,
+                double wheelbase_m) {
+  const Where where{file, key};
+  yaml::require_map(where, node, {"sample_rate", "keyframes", "segments", "speed"});
+  Path path;
+  path.sample_rate_hz = yaml::require_number(where, node, "sample_rate");
+  if (!(path.sample_rate_hz > 0.0)) {
+    yaml::fail(where.child("sample_rate"), node["sample_rate"], "must be > 0 Hz");
+  }
+  const bool has_keyframes = node["keyframes"].IsDefined();
+  const bool has_segments = node["segments"].IsDefined();
+  if (has_keyframes == has_segments) {
+    yaml::fail(where.child("keyframes"), node, "give exactly one of 'keyframes' and 'segments'");
+  }
+  if (has_keyframes) {
+    if (node["speed"]) yaml::fail(where.child("speed"), node["speed"], "only used with segments");
+    path.keyframes = parse_keyframes(where.child("keyframes"), node["keyframes"]);
+  } else {
+    const double speed = yaml::optional_number(where, node, "speed").value_or(kDefaultSpeedMps);
+    if (!(speed > 0.0)) yaml::fail(where.child("speed"), node["speed"], "must be > 0 m/s");
+    const Where seg_where = where.child("segments");
+    const YAML::Node list = node["segments"];
+    yaml::require_sequence(seg_where, list);
+    if (list.size() == 0) yaml::fail(seg_where, list, "need at least one segment");
+    std::vector<PathSegment> segments;
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      segments.push_back(parse_segment(seg_where.index(i), list[i]));
+    }
+    path.keyframes = keyframes_from_segments(segments, wheelbase_m, speed);
+  }
+  const double samples = std::ceil(path.duration_s() * path.sample_rate_hz);
+  if (samples > static_cast<double>(kMaxSamplesPerRun)) {
+    yaml::fail(where.child("sample_rate"), node["sample_rate"],
+               "path needs " + std::to_string(samples) + " samples, more than the limit " +
+                   std::to_string(kMaxSamplesPerRun));
+  }
+  return path;
+}
+
+void check_simulation_size(const std::string& file, int line, const std::string& key,
+                           std::int64_t runs, std::int64_t samples_per_run) {
+  if (runs < 1 || runs > kMaxRuns) {
+    throw InputError(file, line, key,
+                     "runs must be in [1, " + std::to_string(kMaxRuns) + "], got " +
+                         std::to_string(runs));
+  }
+  const double steps = static_cast<double>(runs) * static_cast<double>(samples_per_run);
+  if (steps > kMaxSimulationSteps) {
+    throw InputError(file, line, key,
+                     std::to_string(runs) + " runs x " + std::to_string(samples_per_run) +
+                         " samples exceeds the limit of 1e12 wheel-sample steps");
+  }
+}
+
+Config parse_config(const YAML::Node& root, const std::string& file) {
+  const Where where{file, ""};
+  yaml::require_map(where, root, {"name", "robot", "path", "simulation"});
+  Config config;
+  config.file = file;
+  config.name = root["name"] ? yaml::to_string(where.child("name"), root["name"])
+                             : std::filesystem::path(file).stem().string();
+  config.robot = parse_robot(yaml::require(where, root, "robot"), file, "robot");
+  config.path =
+      parse_path(yaml::require(where, root, "path"), file, "path", config.robot.wheelbase_m);
+  if (const YAML::Node sim = root["simulation"]) {
+    const Where sim_where = where.child("simulation");
+    yaml::require_map(sim_where, sim, {"runs", "seed"});
+    if (sim["runs"]) {
+      config.simulation.runs =
+          yaml::to_integer(sim_where.child("runs"), sim["runs"], 1, kMaxRuns);
+    }
+    if (sim["seed"]) config.simulation.seed = yaml::to_unsigned(sim_where.child("seed"), sim["seed"]);
+    check_simulation_size(file, yaml::line_of(sim["runs"] ? sim["runs"] : sim),
+                          "simulation.runs", config.simulation.runs, sample_count(config.path));
+  }
+  return config;
+}
+
+Config load_config(const std::string& file) { return parse_config(yaml::load_file(file), file); }
+
+}  // namespace odomcov

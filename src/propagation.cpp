@@ -1,0 +1,73 @@
+#include "odomcov/propagation.hpp"
+
+#include <cmath>
+
+#include "series.hpp"
+
+namespace odomcov {
+
+PathCovariance path_covariance(const Path& path, const Robot& robot) {
+  const double B = robot.wheelbase_m;
+  PathCovariance out;
+  KeyframeCovariance current;  // t = 0, zero pose and covariance
+  out.keyframes.push_back(current);
+  Matrix3 P_tangential = Matrix3::Zero();
+  for (std::size_t i = 0; i < path.interval_count(); ++i) {
+    const ArcSegment seg = path.interval(i);
+    const double d = seg.center_m();
+    const double a = seg.heading_change_rad(B);
+    const Matrix3 phi = arc_transition(d, a);
+    const Matrix3 q = arc_covariance(seg, B, robot.noise);
+    P_tangential = phi * P_tangential * phi.transpose() + q;
+    current.t_s = path.keyframes[i + 1].t_s;
+    current.pose_world = drive(current.pose_world, seg, B);
+    current.P_world = tangential_to_world(P_tangential, current.pose_world.z());
+    current.segment_P_world = tangential_to_world(q, current.pose_world.z());
+    out.keyframes.push_back(current);
+  }
+  return out;
+}
+
+Matrix32 arc_increment_jacobian(double center_m, double angle_rad) {
+  // g(d, a) = (d sinc a, d (1 - cos a)/a, a) in the start frame of the sample.
+  //   dg/dd = (sinc a, (1 - cos a)/a, 0) = (sinc a, (a/2) sinc^2(a/2), 0)
+  //   dg/da = (d sinc'(a), d [(1 - cos a)/a]', 1) with, free of cancellation,
+  //     sinc'(a)           = (cos a - sinc a)/a = a (u3(a) - sinc^2(a/2)/2)
+  //     [(1 - cos a)/a]'   = sinc a - sinc^2(a/2)/2
+  const double a = angle_rad;
+  const double d = center_m;
+  const double sinc_a = series::sinc(a);
+  const double sinc_half = series::sinc(0.5 * a);
+  const double half_sinc2 = 0.5 * sinc_half * sinc_half;
+  Eigen::Matrix<double, 2, 2> j_start;  // columns: d/da, d/dd; rows: x, y in the start frame
+  j_start << d * a * (series::u3(a) - half_sinc2), sinc_a,  //
+      d * (sinc_a - half_sinc2), a * half_sinc2;
+  const double c = std::cos(a);
+  const double s = std::sin(a);
+  Eigen::Matrix2d end_from_start;
+  end_from_start << c, s, -s, c;
+  Matrix32 j;
+  j.topRows<2>() = end_from_start * j_start;
+  j.row(2) << 1.0, 0.0;
+  return j;
+}
+
+Matrix3 sampled_covariance(const Path& path, const Robot& robot) {
+  const double B = robot.wheelbase_m;
+  Matrix3 P_tangential = Matrix3::Zero();
+  double heading = 0.0;
+  for (const SampleRun& run : sample_schedule(path)) {
+    const double d = run.increment.center_m();
+    const double a = run.increment.heading_change_rad(B);
+    const Matrix3 phi = arc_transition(d, a);
+    const Matrix32 j = arc_increment_jacobian(d, a);
+    const Matrix3 q = j * wheel_noise_intensity(run.increment, B, robot.noise) * j.transpose();
+    for (std::int64_t n = 0; n < run.count; ++n) {
+      P_tangential = phi * P_tangential * phi.transpose() + q;
+    }
+    heading += static_cast<double>(run.count) * a;
+  }
+  return tangential_to_world(P_tangential, heading);
+}
+
+}  // namespace odomcov
