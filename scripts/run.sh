@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Quick start, step 1: install dependencies, build, and run the main job on a config.
-#   scripts/run.sh configs/kleeman95/table3.yaml [extra odomcov arguments]
+#   scripts/run.sh configs/kleeman95/table3.yaml [extra odomcov run arguments]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 if [ $# -lt 1 ]; then
@@ -9,4 +9,4 @@ if [ $# -lt 1 ]; then
 fi
 "$root/scripts/setup.sh"
 "$root/scripts/build.sh"
-exec "$root/build/src/cli/odomcov" theory "$@"
+exec "$root/build/src/cli/odomcov" run "$@"

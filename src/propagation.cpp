@@ -1,6 +1,9 @@
 #include "odomcov/propagation.hpp"
 
 #include <cmath>
+#include <array>
+#include <complex>
+#include <utility>
 
 #include "series.hpp"
 
@@ -68,6 +71,78 @@ Matrix3 sampled_covariance(const Path& path, const Robot& robot) {
     heading += static_cast<double>(run.count) * a;
   }
   return tangential_to_world(P_tangential, heading);
+}
+
+}  // namespace odomcov
+
+namespace odomcov {
+namespace {
+
+using Complex = std::complex<double>;
+
+/// int_0^1 exp(i a u) expm1(delta u) du by composite 16-point Gauss-Legendre, one panel per
+/// radian of a (the integrand is smooth and entire; expm1 keeps it accurate for tiny delta).
+Complex damped_minus_undamped(double a, double delta) {
+  static const auto nodes = [] {
+    // Gauss-Legendre on [0, 1] by Newton iteration on P_16.
+    constexpr int n = 16;
+    std::array<std::pair<double, double>, n> xw{};
+    for (int i = 0; i < n; ++i) {
+      double z = std::cos(M_PI * (i + 0.75) / (n + 0.5));
+      double dp = 0.0;
+      for (int it = 0; it < 100; ++it) {
+        double p0 = 1.0, p1 = z;
+        for (int k = 2; k <= n; ++k) {
+          const double p2 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k;
+          p0 = p1;
+          p1 = p2;
+        }
+        dp = n * (z * p1 - p0) / (z * z - 1.0);
+        const double step = p1 / dp;
+        z -= step;
+        if (std::abs(step) < 1e-16) break;
+      }
+      xw[static_cast<std::size_t>(i)] = {0.5 * (1.0 - z), 1.0 / ((1.0 - z * z) * dp * dp)};
+    }
+    return xw;
+  }();
+  const int panels = 1 + static_cast<int>(std::abs(a));
+  Complex sum = 0.0;
+  for (int p = 0; p < panels; ++p) {
+    for (const auto& [x, w] : nodes) {
+      const double u = (p + x) / panels;
+      sum += (w / panels) * std::polar(1.0, a * u) * std::expm1(delta * u);
+    }
+  }
+  return sum;
+}
+
+}  // namespace
+
+Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
+  const double B = robot.wheelbase_m;
+  double heading = 0.0;
+  double variance = 0.0;  // accumulated heading variance at the segment start
+  Complex mean = 0.0;
+  for (std::size_t i = 0; i < path.interval_count(); ++i) {
+    const ArcSegment seg = path.interval(i);
+    const double d = seg.center_m();
+    const double a = seg.heading_change_rad(B);
+    const Matrix2 n = wheel_noise_intensity(seg, B, robot.noise);
+    // int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2)
+    const double sinc_half = series::sinc(0.5 * a);
+    const Complex undamped(series::sinc(a), 0.5 * a * sinc_half * sinc_half);
+    const Complex extra = damped_minus_undamped(a, -0.5 * n(0, 0));
+    const Complex damped = undamped + extra;  // int e^{(i a - q/2) u} du
+    const Complex drive(d, 0.5 * n(0, 1));
+    // e^{-V0/2} damped drive - undamped d, without cancellation:
+    const Complex difference = std::expm1(-0.5 * variance) * damped * drive + extra * drive +
+                               undamped * Complex(0.0, 0.5 * n(0, 1));
+    mean += std::polar(1.0, heading) * difference;
+    heading += a;
+    variance += n(0, 0);
+  }
+  return {mean.real(), mean.imag(), 0.0};
 }
 
 }  // namespace odomcov

@@ -179,6 +179,40 @@ TEST(Propagation, SampledPropagationConvergesToClosedForm) {
   }
 }
 
+TEST(Propagation, NoiseInducedMeanOnALine) {
+  // Line of length d, heading variance growing as q s (q = (kL^2 + kR^2)/B^2 per metre):
+  //   E[x] = int_0^d (exp(-q s/2) - 1) ds = d sum_{k>=1} (-x)^k/(k+1)!,  x = q d/2,
+  //   E[y] = (N_td/2) int_0^1 exp(-x u) du = (N_td/2)(1 - exp(-x))/x,  N_td = d (kR^2-kL^2)/(2B),
+  // summed here as series (no cancellation), so the comparison is at rounding level.
+  const Robot robot{0.5, {1e-2, 3e-2}};
+  const double d = 4.0;
+  const double x = (1e-4 + 9e-4) / 0.25 * d / 2;
+  // damp = (1 - exp(-x))/x = sum_{k>=0} (-x)^k/(k+1)!;  E[x]/d = damp - 1 = the k >= 1 terms.
+  double tail = 0, term = -x / 2;
+  for (int k = 1; k < 20; ++k) {
+    tail += term;
+    term *= -x / (k + 2);
+  }
+  const double damp = 1.0 + tail;
+  const double ex = d * tail;
+  const double ey = 0.5 * d * (9e-4 - 1e-4) / (2 * 0.5) * damp;
+  const Path line{100.0, {{0, 0, 0}, {8, d, d}}};
+  const Vector3 m = noise_induced_mean(line, robot);
+  EXPECT_NEAR(m.x(), ex, 4e-15 * std::abs(ex));
+  EXPECT_NEAR(m.y(), ey, 4e-15 * std::abs(ey));
+  EXPECT_EQ(m.z(), 0.0);
+}
+
+TEST(Propagation, NoiseInducedMeanIsSplitInvariant) {
+  std::mt19937_64 rng(31);
+  for (int trial = 0; trial < 50; ++trial) {
+    const test::RandomCase c = test::random_case(rng);
+    const Vector3 whole = noise_induced_mean(c.path, c.robot);
+    const Vector3 split = noise_induced_mean(test::split_path(c.path, 0, rng), c.robot);
+    EXPECT_LT((split - whole).norm(), 1e-12 * whole.norm()) << "trial " << trial;
+  }
+}
+
 TEST(Propagation, IncrementJacobianIsFirstOrderPerturbation) {
   std::mt19937_64 rng(89);
   std::uniform_real_distribution<double> u(-1.0, 1.0);

@@ -37,6 +37,17 @@ PathCovariance path_covariance(const Path& path, const Robot& robot);
 /// Returns the world-frame covariance at the end of the path.
 Matrix3 sampled_covariance(const Path& path, const Robot& robot);
 
+/// The mean of the end-pose error induced by white wheel noise, which first-order theory sets to
+/// zero ([Kleeman95] Table V shows it at large noise). The heading error Theta(u) is a sum of
+/// Gaussian increments, so E[exp(i Theta)] = exp(-V/2) exactly, with V its accumulated variance;
+/// the along-track noise of each increment correlates with its own heading change through the
+/// midpoint of the arc. In the continuum limit this gives, along the path,
+///   E[d(x + i y)] = exp(-V(u)/2) exp(i theta(u)) (ds + i N_td du / 2),   E[theta] = 0,
+/// with N_td the off-diagonal of the noise intensity (wheel_noise_intensity). The result is
+/// exact in the heading variance and first order in the along-track noise; the sampled
+/// simulation adds O(1/f). World frame, error = true - odometry.
+Vector3 noise_induced_mean(const Path& path, const Robot& robot);
+
 /// d(arc_displacement)/d(angle, center), rotated into the end frame of the sample.
 Matrix32 arc_increment_jacobian(double center_m, double angle_rad);
 

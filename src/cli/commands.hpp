@@ -3,6 +3,9 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "odomcov/validation.hpp"
 
 namespace odomcov::cli {
 
@@ -12,5 +15,9 @@ inline constexpr int kExitInconsistent = 1;
 inline constexpr int kExitBadInput = 2;
 
 void setup_theory(CLI::App& app, int& exit_code);
+void setup_run(CLI::App& app, int& exit_code);
+
+/// The JSON of `run` (SPEC "JSON of run"), shared with `sweep`.
+nlohmann::json validation_json(const std::string& name, const Validation& v);
 
 }  // namespace odomcov::cli

@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "odomcov 0.1.0");
   int exit_code = kExitOk;
   setup_theory(app, exit_code);
+  setup_run(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -56,6 +56,38 @@ Matrix3 std_corr_matrix(const Matrix3& cov) {
   return out;
 }
 
+json moments_json(const Vector3& mean, const Matrix3& cov) {
+  const Matrix3 sc = std_corr_matrix(cov);
+  Matrix3 corr = sc;
+  corr.diagonal().setOnes();
+  return {{"mean", to_json(mean)},
+          {"cov", to_json(cov)},
+          {"std", to_json(Vector3(sc.diagonal()))},
+          {"corr", to_json(corr)}};
+}
+
+std::string moments_text(const Vector3& mean, const Matrix3& cov) {
+  std::ostringstream out;
+  out << "  mean is:\n";
+  for (int i = 0; i < 3; ++i) out << "    " << sci(mean(i), 4) << "\n";
+  out << "  covariance matrix is:\n" << matrix_rows(cov, "  ")
+      << "  stand dev, correlation matrix is:\n" << matrix_rows(std_corr_matrix(cov), "  ");
+  return out.str();
+}
+
+json test_json(const TestResult& t) {
+  if (!t.valid) return {{"statistic", nullptr}, {"dof", t.dof}, {"p_value", nullptr}};
+  return {{"statistic", t.statistic}, {"dof", t.dof}, {"p_value", t.p_value}};
+}
+
+std::string test_text(const TestResult& t) {
+  if (!t.valid) return "not applicable (singular reference covariance or too few samples)";
+  char buf[128];
+  std::snprintf(buf, sizeof buf, "statistic %.4g, %d dof, p = %.4g", t.statistic, t.dof,
+                t.p_value);
+  return buf;
+}
+
 void check_output_path(const std::string& path) {
   namespace fs = std::filesystem;
   fs::path dir = fs::path(path).parent_path();

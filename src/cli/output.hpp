@@ -7,6 +7,7 @@
 #include <string>
 
 #include "odomcov/closed_form.hpp"
+#include "odomcov/statistics.hpp"
 
 namespace odomcov::cli {
 
@@ -24,6 +25,17 @@ std::string matrix_rows(const Matrix3& m, const std::string& indent, int precisi
 
 /// Standard deviations on the diagonal, correlation coefficients off it ([Kleeman95] §7).
 Matrix3 std_corr_matrix(const Matrix3& cov);
+
+/// The {mean, cov, std, corr} block of ../shared/SPEC.md.
+json moments_json(const Vector3& mean, const Matrix3& cov);
+
+/// [Kleeman95] §7 layout: "mean is:", "covariance matrix is:", "stand dev, correlation matrix
+/// is:", each as indented rows.
+std::string moments_text(const Vector3& mean, const Matrix3& cov);
+
+/// {statistic, dof, p_value}; statistic and p_value are null when the test is not applicable.
+json test_json(const TestResult& t);
+std::string test_text(const TestResult& t);
 
 /// Fails with a usage error (exit 2) unless the output's directory exists and is writable;
 /// called before any work starts.

@@ -1,0 +1,172 @@
+// The simulator against the closed form, at stated alpha with fixed seeds; determinism across
+// thread counts; the vectorised kernel against the scalar reference, bit for bit.
+#include "odomcov/simulator.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
+
+#include <boost/math/distributions/normal.hpp>
+#include <cmath>
+#include <random>
+
+#include "odomcov/propagation.hpp"
+#include "test_util.hpp"
+
+namespace odomcov {
+namespace {
+
+/// Level of every statistical assertion in this file.
+constexpr double kAlpha = 1e-3;
+
+Path segments_path(std::vector<PathSegment> segments, double wheelbase_m, double rate_hz) {
+  return {rate_hz, keyframes_from_segments(segments, wheelbase_m, 0.5)};
+}
+
+/// Runs the simulation and applies the run tests (mean chi^2 and covariance LRT) plus an
+/// element-wise check of the sample covariance: for Gaussian data
+/// Var(s_ij) = (sigma_ii sigma_jj + sigma_ij^2)/(n - 1), and each of the 6 elements must lie
+/// within z * SE with z the two-sided Bonferroni quantile at kAlpha.
+void expect_matches_theory(const Robot& robot, const Path& path, std::int64_t runs,
+                           std::uint64_t seed, const char* what) {
+  const Matrix3 theory = path_covariance(path, robot).end().P_world;
+  const Vector3 bias = noise_induced_mean(path, robot);
+  ASSERT_LT(bias.dot(theory.llt().solve(bias)) * static_cast<double>(runs), 0.3 * 0.3)
+      << what << ": first-order theory is not the right reference at this noise";
+  const SampleMoments s = moments(Simulator(robot, path).simulate(runs, seed));
+  const TestResult mean = mean_test_known_covariance(s, Vector3::Zero(), theory);
+  const TestResult cov = covariance_test(s, theory);
+  EXPECT_GE(mean.p_value, kAlpha) << what << ": mean " << s.mean.transpose();
+  EXPECT_GE(cov.p_value, kAlpha) << what << ": covariance\n" << s.cov << "\nvs\n" << theory;
+  const double z = boost::math::quantile(boost::math::normal(), 1.0 - kAlpha / (2 * 6));
+  for (int i = 0; i < 3; ++i) {
+    for (int j = i; j < 3; ++j) {
+      const double se = std::sqrt((theory(i, i) * theory(j, j) + theory(i, j) * theory(i, j)) /
+                                  static_cast<double>(runs - 1));
+      EXPECT_NEAR(s.cov(i, j), theory(i, j), z * se) << what << " entry " << i << j;
+    }
+  }
+}
+
+TEST(Simulator, LineTurnAndArcMatchTheClosedForm) {
+  // kL != kR, and small enough that the noise-induced (second-order) mean, which grows as k^2
+  // while the standard error of the mean grows as k, stays below 0.3 standard errors here
+  // (checked below with noise_induced_mean); at k ~ 1e-3 it is already 4 SE on a 3 m line.
+  const Robot robot{0.5, {3e-5, 7.5e-5}};
+  using K = PathSegment::Kind;
+  expect_matches_theory(robot, segments_path({{K::line, 3.0, 0, 0}}, 0.5, 100), 20000, 11,
+                        "line");
+  expect_matches_theory(robot, segments_path({{K::line, -2.0, 0, 0}}, 0.5, 100), 20000, 12,
+                        "backwards line");
+  expect_matches_theory(robot, segments_path({{K::turn, 0, -3.0, 0}}, 0.5, 100), 20000, 13,
+                        "clockwise turn");
+  expect_matches_theory(robot, segments_path({{K::arc, 0, 2.0, 0.8}}, 0.5, 100), 20000, 14,
+                        "left arc");
+  expect_matches_theory(robot, segments_path({{K::arc, 0, 1.5, -0.6}}, 0.5, 100), 20000, 15,
+                        "arc, negative radius, backwards");
+  expect_matches_theory(robot,
+                        segments_path({{K::line, 1.0, 0, 0},
+                                       {K::arc, 0, -2.0, 0.4},
+                                       {K::turn, 0, 1.0, 0},
+                                       {K::line, -1.5, 0, 0}},
+                                      0.5, 50),
+                        20000, 16, "mixed path");
+}
+
+TEST(Simulator, TestsHavePowerAgainstAWrongModel) {
+  // The same data against the theory with kL and kR swapped must be rejected: the tests above
+  // can tell a wrong model apart at this sample size.
+  using K = PathSegment::Kind;
+  const Path path = segments_path({{K::arc, 0, 2.0, 0.8}, {K::line, 2.0, 0, 0}}, 0.5, 100);
+  const SampleMoments s = moments(Simulator({0.5, {1e-3, 2.5e-3}}, path).simulate(20000, 21));
+  const Matrix3 wrong = path_covariance(path, {0.5, {2.5e-3, 1e-3}}).end().P_world;
+  EXPECT_LT(covariance_test(s, wrong).p_value, kAlpha);
+}
+
+TEST(Simulator, NoiseInducedMeanMatchesLargeNoise) {
+  // Table V noise (kL = 0.01, kR = 0.02): first-order theory's zero mean is rejected, the
+  // noise-induced mean is not (Hotelling's T^2 with the sample covariance, since at this noise
+  // the covariance itself departs from first order).
+  const Path fig7{200.0,
+                  {{0, 0, 0}, {2, 2, 2}, {3, 1.6073, 2.3927}, {4, 3.5708, 3.5708},
+                   {5, 3.37445, 4.15985}}};
+  const Robot robot{0.5, {1e-2, 2e-2}};
+  const SampleMoments s = moments(Simulator(robot, fig7).simulate(200000, 5));
+  EXPECT_LT(hotelling_test(s, Vector3::Zero()).p_value, kAlpha);
+  EXPECT_GE(hotelling_test(s, noise_induced_mean(fig7, robot)).p_value, kAlpha)
+      << s.mean.transpose() << " vs " << noise_induced_mean(fig7, robot).transpose();
+}
+
+TEST(Simulator, ZeroNoiseGivesZeroError) {
+  std::mt19937_64 rng(3);
+  const test::RandomCase c = test::random_case(rng, 37.0);
+  Robot silent = c.robot;
+  silent.noise = {0.0, 0.0};
+  const Simulator sim(silent, c.path);
+  for (const Vector3& e : sim.errors(1, 0, 16)) EXPECT_EQ(e, Vector3::Zero());
+}
+
+TEST(Simulator, OdometryEndPoseIsTheNominalPath) {
+  std::mt19937_64 rng(4);
+  for (int trial = 0; trial < 20; ++trial) {
+    test::RandomCase c = test::random_case(rng, 100.0);
+    for (Keyframe& k : c.path.keyframes) k.t_s = std::ceil(k.t_s * 100.0) / 100.0;
+    const Vector3 end = path_end_pose(c.path, c.robot.wheelbase_m);
+    EXPECT_LT((Simulator(c.robot, c.path).odometry_end_pose() - end).norm(), 1e-10);
+  }
+}
+
+TEST(Simulator, SameSeedSameBitsForAnyThreadCount) {
+  const Path path{200.0, {{0, 0, 0}, {2, 2, 2}, {3, 1.6073, 2.3927}, {4, 3.5708, 3.5708}}};
+  const Simulator sim({0.5, {1e-3, 2e-3}}, path);
+  const MomentAccumulator one = sim.simulate(5003, 99, 1);
+  for (int threads : {2, 3, 4}) {
+    const MomentAccumulator many = sim.simulate(5003, 99, threads);
+    EXPECT_EQ(many.count(), 5003);
+    EXPECT_EQ(many.mean(), one.mean()) << threads << " threads";
+    EXPECT_EQ(many.scatter(), one.scatter()) << threads << " threads";
+  }
+  EXPECT_NE(sim.simulate(5003, 100, 2).mean(), one.mean());  // the seed matters
+  EXPECT_EQ(sim.errors(99, 10, 5, 1), sim.errors(99, 10, 5, 2));
+}
+
+TEST(Simulator, VectorKernelMatchesScalarReferenceBitForBit) {
+  // Includes lanes that leave the series bounds: large noise (|eps| > 0.05), a 2 Hz sample
+  // rate on a fast spin (|h| > 0.45 per sample, division branch) and wheel reversals.
+  std::mt19937_64 rng(6);
+  for (int trial = 0; trial < 12; ++trial) {
+    test::RandomCase c = test::random_case(rng, trial % 3 == 0 ? 2.0 : 60.0);
+    if (trial % 2 == 0) c.robot.noise = {0.15, 0.2};
+    const Simulator sim(c.robot, c.path);
+    const std::vector<Vector3> fast = sim.errors(7, 1000, 24);
+    for (std::int64_t r = 0; r < 24; ++r) {
+      EXPECT_EQ(fast[static_cast<std::size_t>(r)], sim.reference_error(7, 1000 + r))
+          << "trial " << trial << ", run " << r;
+    }
+  }
+}
+
+TEST(Simulator, StreamingStatisticsMatchStoredErrors) {
+  const Path path{100.0, {{0, 0, 0}, {1, 1.0, 1.2}, {2, 0.5, 2.0}}};
+  const Simulator sim({0.4, {2e-3, 1e-3}}, path);
+  const std::vector<Vector3> e = sim.errors(5, 0, 1001);
+  const MomentAccumulator streamed = sim.simulate(1001, 5);
+  const SampleMoments stored = moments(e);
+  EXPECT_EQ(streamed.count(), 1001);
+  EXPECT_LT((streamed.mean() - stored.mean).norm(), 1e-15);
+  EXPECT_LT((streamed.covariance() - stored.cov).cwiseAbs().maxCoeff(), 1e-12 * stored.cov.norm());
+}
+
+TEST(Simulator, CancellationStopsEarly) {
+  const Path path{100.0, {{0, 0, 0}, {10, 10, 10}}};
+  const Simulator sim({0.5, {1e-3, 1e-3}}, path);
+  Progress progress;
+  progress.cancel = true;
+  EXPECT_EQ(sim.simulate(100000, 1, 0, &progress).count(), 0);
+  Progress counted;
+  EXPECT_EQ(sim.simulate(1000, 1, 0, &counted).count(), 1000);
+  EXPECT_EQ(counted.runs_done.load(), 1000);
+}
+
+}  // namespace
+}  // namespace odomcov
