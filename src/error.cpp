@@ -19,6 +19,7 @@ InputError::InputError(std::string file, int line, std::string key, const std::s
     : std::runtime_error(format_message(file, line, key, what)),
       file_(std::move(file)),
       line_(line),
-      key_(std::move(key)) {}
+      key_(std::move(key)),
+      message_(what) {}
 
 }  // namespace odomcov

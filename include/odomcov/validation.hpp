@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "odomcov/config.hpp"
 #include "odomcov/simulator.hpp"
@@ -24,15 +25,23 @@ struct Validation {
   TestResult cov_test;        // LRT of Sigma = Sigma_theory
   double nees_mean = 0.0;
   std::string verdict;
-  // Beyond first order (information only, not part of the verdict): the noise-induced mean of
-  // propagation.hpp and the chi^2 mean test against it.
+  // Beyond the continuous first-order theory (information only, not part of the verdict):
+  // the noise-induced mean of propagation.hpp with the chi^2 mean test against it, and the
+  // first-order covariance of the sampled odometry ([Wang88], sampled_covariance) with the
+  // covariance test against it, which accounts for noise lumped per sample at low rates.
   Vector3 noise_induced_mean = Vector3::Zero();
   TestResult noise_induced_mean_test;
+  Matrix3 sampled_cov = Matrix3::Zero();
+  TestResult sampled_cov_test;
+  // Optional: the errors of the first runs (for scatter plots) and the odometry end pose.
+  std::vector<Vector3> samples;
+  Vector3 odometry_end_pose = Vector3::Zero();
 };
 
 /// Simulates config.simulation.runs runs with config.simulation.seed and tests the end-pose
 /// error against the theory at level alpha. `progress` (optional) counts finished runs.
+/// `keep_samples` asks for the errors of runs 0 .. keep_samples-1 as well.
 Validation validate(const Config& config, double alpha, int threads = 0,
-                    Progress* progress = nullptr);
+                    Progress* progress = nullptr, std::int64_t keep_samples = 0);
 
 }  // namespace odomcov

@@ -1,4 +1,5 @@
 // odomcov theory CONFIG [--json FILE]: the closed form at every keyframe ([Kleeman95] Tables I-II).
+#include <cmath>
 #include <iostream>
 #include <sstream>
 
@@ -29,6 +30,30 @@ std::string ellipse_text(const ErrorEllipse& e) {
 
 json ellipse_json(const ErrorEllipse& e) {
   return {{"semi_axes", {e.semi_major_m, e.semi_minor_m}}, {"angle", e.angle_rad}};
+}
+
+/// Points along the nominal path and both wheel tracks, for plotting (Fig. 7).
+json path_trace(const Config& config) {
+  constexpr int kPointsPerInterval = 48;
+  const double half_b = 0.5 * config.robot.wheelbase_m;
+  json center = json::array(), left = json::array(), right = json::array();
+  Vector3 start = Vector3::Zero();
+  auto add = [&](const Vector3& pose) {
+    const double nx = -std::sin(pose.z()), ny = std::cos(pose.z());  // left normal
+    center.push_back({pose.x(), pose.y()});
+    left.push_back({pose.x() + half_b * nx, pose.y() + half_b * ny});
+    right.push_back({pose.x() - half_b * nx, pose.y() - half_b * ny});
+  };
+  add(start);
+  for (std::size_t i = 0; i < config.path.interval_count(); ++i) {
+    const ArcSegment seg = config.path.interval(i);
+    for (int k = 1; k <= kPointsPerInterval; ++k) {
+      const double f = static_cast<double>(k) / kPointsPerInterval;
+      add(drive(start, {f * seg.left_m, f * seg.right_m}, config.robot.wheelbase_m));
+    }
+    start = drive(start, seg, config.robot.wheelbase_m);
+  }
+  return {{"center", center}, {"left", left}, {"right", right}};
 }
 
 int run_theory(const TheoryOptions& opt) {
@@ -67,9 +92,13 @@ int run_theory(const TheoryOptions& opt) {
   std::cout << out.str();
   if (!opt.json.empty()) {
     const json doc = {{"name", config.name},
+                      {"robot", {{"wheelbase", config.robot.wheelbase_m},
+                                 {"k_left", config.robot.noise.k_left},
+                                 {"k_right", config.robot.noise.k_right}}},
                       {"keyframes", keyframes},
                       {"final", {{"pose", to_json(theory.end().pose_world)},
-                                 {"cov", to_json(theory.end().P_world)}}}};
+                                 {"cov", to_json(theory.end().P_world)}}},
+                      {"trace", path_trace(config)}};
     write_json_atomic(opt.json, doc);
   }
   return kExitOk;

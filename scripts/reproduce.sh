@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Regenerates everything in results/ (see results/README.md). Deterministic: fixed seeds, and
+# the statistics do not depend on the thread count.
+#   scripts/reproduce.sh            # all
+#   scripts/reproduce.sh kleeman95  # one part: kleeman95, sweeps (later issues add more)
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+"$root/scripts/setup.sh"
+"$root/scripts/build.sh"
+odomcov="$root/build/src/cli/odomcov"
+python=/usr/bin/python3  # Debian's, which has matplotlib
+results="$root/results"
+parts=("${@:-all}")
+want() { [[ " ${parts[*]} " == *" all "* || " ${parts[*]} " == *" $1 "* ]]; }
+
+if want kleeman95; then
+  out="$results/kleeman95"
+  mkdir -p "$out"
+  # Tables I and II: the closed form along the Fig. 7 path.
+  "$odomcov" theory "$root/configs/kleeman95/fig7.yaml" --json "$out/table1.json" > "$out/table1.txt"
+  "$odomcov" theory "$root/configs/kleeman95/fig9.yaml" --json "$out/table2.json" > "$out/table2.txt"
+  # Tables III-V: 10 000 Monte-Carlo runs against theory (2000 end points kept for the plots).
+  for t in 3 4 5; do
+    "$odomcov" run "$root/configs/kleeman95/table$t.yaml" --samples 2000 \
+      --json "$out/table$t.json" > "$out/table$t.txt"
+  done
+  # Figures 8 and 9, with the Table III and IV end points.
+  "$python" "$root/scripts/plot_ellipses.py" "$out/table1.json" --run "$out/table3.json" --out "$out/fig8.png"
+  "$python" "$root/scripts/plot_ellipses.py" "$out/table2.json" --run "$out/table4.json" --out "$out/fig9.png"
+fi
+
+if want sweeps; then
+  out="$results/sweeps"
+  mkdir -p "$out"
+  "$odomcov" sweep "$root/configs/sweeps/noise_breakdown.yaml" --out "$out/noise_breakdown.csv" \
+    --json "$out/noise_breakdown.json"
+  "$python" "$root/scripts/plot_sweep.py" "$out/noise_breakdown.csv" --json "$out/noise_breakdown.json" \
+    --x-factor 1e-3 --x-label "kL = kR [m^1/2]" \
+    --title "First-order theory against wheel noise: Fig. 7 path, 10 000 runs per point" \
+    --out "$out/noise_breakdown.png"
+  "$odomcov" sweep "$root/configs/sweeps/sample_rate.yaml" --out "$out/sample_rate.csv" \
+    --json "$out/sample_rate.json"
+  "$python" "$root/scripts/plot_sweep.py" "$out/sample_rate.csv" --json "$out/sample_rate.json" \
+    --x path.sample_rate --x-label "sample rate [Hz]" \
+    --title "First-order theory against sample rate: Fig. 7 path, kL = kR = 1e-3 x noise_scale" \
+    --out "$out/sample_rate.png"
+fi
+echo "results regenerated in $results" >&2

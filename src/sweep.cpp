@@ -1,0 +1,236 @@
+#include "odomcov/sweep.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "yaml_util.hpp"
+
+namespace odomcov {
+namespace {
+
+using yaml::Where;
+
+/// SplitMix64 [Steele14]: a bijective mixer, so distinct (seed, i) give well-spread seeds.
+std::uint64_t splitmix64(std::uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+std::vector<std::string> split_dotted(const std::string& key) {
+  std::vector<std::string> parts;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t dot = key.find('.', start);
+    parts.push_back(key.substr(start, dot - start));
+    if (dot == std::string::npos) break;
+    start = dot + 1;
+  }
+  return parts;
+}
+
+bool is_index(const std::string& s) {
+  return !s.empty() && s.find_first_not_of("0123456789") == std::string::npos;
+}
+
+/// Sets the numeric value at a dotted key. Maps are entered by key (created if absent, so the
+/// config parser can reject unknown keys); lists by index, or by the name of the single-key
+/// map they hold (effects: "world.effects.wheel_diameter_ratio.Ed"). Returns an error or "".
+std::string set_dotted(YAML::Node root, const std::string& key, double value) {
+  const std::vector<std::string> parts = split_dotted(key);
+  YAML::Node node = root;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    const std::string& part = parts[i];
+    const bool last = i + 1 == parts.size();
+    if (node.IsSequence()) {
+      YAML::Node next;
+      if (is_index(part)) {
+        const std::size_t index = std::stoul(part);
+        if (index >= node.size()) return "index " + part + " is past the end of the list";
+        next = node[index];
+      } else {
+        for (std::size_t j = 0; j < node.size(); ++j) {
+          if (node[j].IsMap() && node[j][part]) {
+            next = node[j][part];
+            break;
+          }
+        }
+        if (!next) return "no list entry named '" + part + "'";
+      }
+      if (last) {
+        if (!next.IsScalar()) return "'" + part + "' is not a number";
+        next = value;
+        return "";
+      }
+      node.reset(next);
+      continue;
+    }
+    if (!node.IsMap() && !node.IsNull()) return "'" + part + "' is not inside a map";
+    if (last) {
+      if (node[part] && !node[part].IsScalar()) return "'" + part + "' is not a number";
+      node[part] = value;
+      return "";
+    }
+    YAML::Node next = node[part];
+    node.reset(next);
+  }
+  return "";
+}
+
+}  // namespace
+
+std::size_t SweepPlan::point_count() const {
+  std::size_t n = 1;
+  for (const SweepAxis& a : axes) n *= a.values.size();
+  return n;
+}
+
+std::vector<double> SweepPlan::point_values(std::size_t i) const {
+  std::vector<double> values(axes.size());
+  for (std::size_t a = axes.size(); a-- > 0;) {
+    values[a] = axes[a].values[i % axes[a].values.size()];
+    i /= axes[a].values.size();
+  }
+  return values;
+}
+
+std::uint64_t SweepPlan::point_seed(std::size_t i) const {
+  return splitmix64(seed ^ splitmix64(static_cast<std::uint64_t>(i)));
+}
+
+Config SweepPlan::point_config(std::size_t i) const {
+  const std::vector<double> values = point_values(i);
+  YAML::Node root = YAML::Clone(*base);
+  double noise_scale = 1.0, path_scale = 1.0;
+  bool runs_on_axis = false;
+  auto describe = [&] {
+    std::string text = "point " + std::to_string(i) + " (";
+    for (std::size_t a = 0; a < axes.size(); ++a) {
+      text += (a ? ", " : "") + axes[a].name + " = " + yaml::format_number(values[a]);
+    }
+    return text + ")";
+  };
+  for (std::size_t a = 0; a < axes.size(); ++a) {
+    const SweepAxis& axis = axes[a];
+    if (axis.name == "noise_scale") {
+      noise_scale *= values[a];
+    } else if (axis.name == "path_scale") {
+      path_scale *= values[a];
+    } else {
+      runs_on_axis = runs_on_axis || axis.name == "simulation.runs";
+      const std::string error = set_dotted(root, axis.name, values[a]);
+      if (!error.empty()) throw InputError(file, axis.line, "grid." + axis.name, error);
+    }
+  }
+  if (runs > 0 && !runs_on_axis) root["simulation"]["runs"] = runs;
+  Config config;
+  try {
+    config = parse_config(root, base_file);
+  } catch (const InputError& e) {
+    const SweepAxis* axis = nullptr;
+    for (const SweepAxis& a : axes) {
+      if (e.key().rfind(a.name, 0) == 0) axis = &a;
+    }
+    throw InputError(file, axis ? axis->line : 0, axis ? "grid." + axis->name : "base",
+                     describe() + ": " + e.key() + ": " + e.message());
+  }
+  config.simulation.seed = point_seed(i);
+  config.robot.noise.k_left *= noise_scale;
+  config.robot.noise.k_right *= noise_scale;
+  if (path_scale != 1.0) {
+    config.path = scale_path(config.path, path_scale);
+    check_simulation_size(file, 0, "grid.path_scale", config.simulation.runs,
+                          sample_count(config.path));
+  }
+  return config;
+}
+
+SweepPlan load_sweep(const std::string& file) {
+  const YAML::Node root = yaml::load_file(file);
+  const Where where{file, ""};
+  yaml::require_map(where, root, {"base", "runs", "seed", "grid"});
+  SweepPlan plan;
+  plan.file = file;
+  const std::string base = yaml::to_string(where.child("base"), yaml::require(where, root, "base"));
+  plan.base_file = (std::filesystem::path(file).parent_path() / base).lexically_normal().string();
+  if (root["runs"]) plan.runs = yaml::to_integer(where.child("runs"), root["runs"], 1, kMaxRuns);
+  if (root["seed"]) plan.seed = yaml::to_unsigned(where.child("seed"), root["seed"]);
+  const YAML::Node grid = yaml::require(where, root, "grid");
+  if (!grid.IsMap() || grid.size() == 0) yaml::fail(where.child("grid"), grid, "expected a map of axes");
+  for (const auto& entry : grid) {
+    SweepAxis axis;
+    axis.name = entry.first.as<std::string>();
+    const Where axis_where = where.child("grid").child(axis.name);
+    axis.line = yaml::line_of(entry.first);
+    if (axis.name == "simulation.seed") {
+      yaml::fail(axis_where, entry.first, "seeds are derived per point from the sweep's seed");
+    }
+    yaml::require_sequence(axis_where, entry.second);
+    if (entry.second.size() == 0) yaml::fail(axis_where, entry.second, "needs at least one value");
+    for (std::size_t i = 0; i < entry.second.size(); ++i) {
+      const double v = yaml::to_number(axis_where.index(i), entry.second[i]);
+      if ((axis.name == "noise_scale" && v < 0.0) || (axis.name == "path_scale" && v <= 0.0)) {
+        yaml::fail(axis_where.index(i), entry.second[i],
+                   axis.name == "noise_scale" ? "must be >= 0" : "must be > 0");
+      }
+      axis.values.push_back(v);
+    }
+    for (const SweepAxis& other : plan.axes) {
+      if (other.name == axis.name) yaml::fail(axis_where, entry.first, "axis given twice");
+    }
+    plan.axes.push_back(std::move(axis));
+  }
+  plan.base = std::make_shared<const YAML::Node>(yaml::load_file(plan.base_file));
+  for (std::size_t i = 0; i < plan.point_count(); ++i) plan.point_config(i);  // validate all
+  return plan;
+}
+
+Path scale_path(const Path& path, double scale) {
+  Path out{path.sample_rate_hz, {path.keyframes.front()}};
+  for (std::size_t i = 0; i < path.interval_count(); ++i) {
+    const ArcSegment seg = path.interval(i);
+    const double half_turn = 0.5 * (seg.right_m - seg.left_m);  // a B/2, kept
+    const ArcSegment scaled{scale * seg.center_m() - half_turn, scale * seg.center_m() + half_turn};
+    const double fast = std::max(std::abs(seg.left_m), std::abs(seg.right_m));
+    const double fast_scaled = std::max(std::abs(scaled.left_m), std::abs(scaled.right_m));
+    const double span = path.keyframes[i + 1].t_s - path.keyframes[i].t_s;
+    const Keyframe& last = out.keyframes.back();
+    out.keyframes.push_back({last.t_s + (fast > 0 ? span * fast_scaled / fast : span),
+                             last.left_m + scaled.left_m, last.right_m + scaled.right_m});
+  }
+  return out;
+}
+
+SweepMetrics sweep_metrics(const Validation& v) {
+  SweepMetrics m;
+  const Vector3 sim_std = v.simulation.cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  const Vector3 theory_std = v.theory_cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  const double n = static_cast<double>(v.simulation.n);
+  for (int i = 0; i < 3; ++i) {
+    m.std_rel_err(i) = sim_std(i) / theory_std(i) - 1.0;
+    m.bias_se(i) = (v.simulation.mean(i) - v.theory_mean(i)) / (sim_std(i) / std::sqrt(n));
+    for (int j = i + 1; j < 3; ++j) {
+      const double sim_corr = v.simulation.cov(i, j) / (sim_std(i) * sim_std(j));
+      const double theory_corr = v.theory_cov(i, j) / (theory_std(i) * theory_std(j));
+      m.max_corr_diff = std::max(m.max_corr_diff, std::abs(sim_corr - theory_corr));
+    }
+  }
+  m.p_mean = v.mean_test.p_value;
+  m.p_cov = v.cov_test.p_value;
+  m.nees_mean = v.nees_mean;
+  m.verdict = v.verdict;
+  return m;
+}
+
+const std::vector<std::string>& sweep_metric_columns() {
+  static const std::vector<std::string> columns{
+      "runs",       "seed",          "std_rel_err_x", "std_rel_err_y", "std_rel_err_theta",
+      "max_corr_diff", "bias_x_se",  "bias_y_se",     "bias_theta_se", "p_mean",
+      "p_cov",      "nees_mean",     "verdict"};
+  return columns;
+}
+
+}  // namespace odomcov

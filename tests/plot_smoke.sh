@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# The plotting scripts run on the tool's own JSON/CSV and write an image.
+#   plot_smoke.sh ODOMCOV SOURCE_DIR WORKDIR
+set -euo pipefail
+odomcov=$1 src=$2 work=$3
+rm -rf "$work" && mkdir -p "$work"
+"$odomcov" theory "$src/configs/kleeman95/fig9.yaml" --json "$work/theory.json" > /dev/null
+"$odomcov" run "$src/configs/kleeman95/table4.yaml" --runs 500 --samples 200 --json "$work/run.json" > /dev/null
+/usr/bin/python3 "$src/scripts/plot_ellipses.py" "$work/theory.json" --run "$work/run.json" --out "$work/fig.png"
+"$odomcov" sweep "$src/tests/data/sweep/small.yaml" --out "$work/sweep.csv" --json "$work/sweep.json" > /dev/null
+/usr/bin/python3 "$src/scripts/plot_sweep.py" "$work/sweep.csv" --json "$work/sweep.json" --x path.sample_rate --out "$work/sweep.png"
+for f in fig.png sweep.png; do
+  [ "$(head -c 8 "$work/$f" | od -An -tx1 | tr -d ' \n')" = "89504e470d0a1a0a" ] || { echo "FAIL: $f is not a PNG"; exit 1; }
+done
+echo ok
