@@ -69,6 +69,71 @@ PathSegment parse_segment(const Where& where, const YAML::Node& node) {
 
 }  // namespace
 
+EffectList parse_effects(const YAML::Node& node, const std::string& file, const std::string& key) {
+  const Where where{file, key};
+  yaml::require_sequence(where, node);
+  EffectList list;
+  for (std::size_t i = 0; i < node.size(); ++i) {
+    const Where item_where = where.index(i);
+    const YAML::Node item = node[i];
+    if (!item.IsMap() || item.size() != 1) {
+      yaml::fail(item_where, item, "expected a single-key map such as {wheel_diameter_ratio: {Ed: 1.004}}");
+    }
+    const std::string name = item.begin()->first.as<std::string>();
+    const Where effect_where = item_where.child(name);
+    const EffectInfo* info = find_effect(name);
+    if (!info) {
+      std::string known;
+      for (const EffectInfo& e : effect_catalogue()) known += (known.empty() ? "" : ", ") + e.name;
+      yaml::fail(effect_where, item.begin()->first, "unknown effect (known: " + known + ")");
+    }
+    const YAML::Node params = item.begin()->second;
+    if (!params.IsMap()) yaml::fail(effect_where, params, "expected a map of parameters");
+    EffectSpec spec{name, {}};
+    for (const auto& entry : params) {
+      const std::string p = entry.first.as<std::string>();
+      bool known = false;
+      for (const EffectParameterInfo& info_p : info->parameters) known = known || info_p.name == p;
+      if (!known) yaml::fail(effect_where.child(p), entry.first, "unknown parameter");
+    }
+    for (const EffectParameterInfo& p : info->parameters) {
+      spec.values.push_back(yaml::require_number(effect_where, params, p.name.c_str()));
+    }
+    if (const std::string error = check_effect(spec); !error.empty()) {
+      // Name the offending parameter's line when the message starts with it.
+      for (const EffectParameterInfo& p : info->parameters) {
+        if (error.rfind(p.name + " ", 0) == 0) {
+          yaml::fail(effect_where.child(p.name), params[p.name], error.substr(p.name.size() + 1));
+        }
+      }
+      yaml::fail(effect_where, params, error);
+    }
+    for (const EffectSpec& other : list) {
+      if (other.name == name) yaml::fail(effect_where, item, "effect listed twice");
+    }
+    list.push_back(std::move(spec));
+  }
+  if (list.size() > 16) yaml::fail(where, node, "at most 16 effects");
+  return list;
+}
+
+World parse_world(const YAML::Node& node, const std::string& file, const std::string& key,
+                  const WheelNoise& nominal) {
+  const Where where{file, key};
+  yaml::require_map(where, node, {"effects", "k_left", "k_right"});
+  World world;
+  world.noise = nominal;
+  if (node["effects"]) world.effects = parse_effects(node["effects"], file, where.child("effects").key);
+  for (auto [name, target] : {std::pair{"k_left", &world.noise.k_left},
+                              std::pair{"k_right", &world.noise.k_right}}) {
+    if (const auto k = yaml::optional_number(where, node, name)) {
+      if (*k < 0.0) yaml::fail(where.child(name), node[name], "must be >= 0");
+      *target = *k;
+    }
+  }
+  return world;
+}
+
 Robot parse_robot(const YAML::Node& node, const std::string& file, const std::string& key) {
   const Where where{file, key};
   yaml::require_map(where, node, {"wheelbase", "k_left", "k_right"});
@@ -142,7 +207,7 @@ void check_simulation_size(const std::string& file, int line, const std::string&
 
 Config parse_config(const YAML::Node& root, const std::string& file) {
   const Where where{file, ""};
-  yaml::require_map(where, root, {"name", "robot", "path", "simulation"});
+  yaml::require_map(where, root, {"name", "robot", "path", "world", "model", "simulation"});
   Config config;
   config.file = file;
   config.name = root["name"] ? yaml::to_string(where.child("name"), root["name"])
@@ -150,6 +215,18 @@ Config parse_config(const YAML::Node& root, const std::string& file) {
   config.robot = parse_robot(yaml::require(where, root, "robot"), file, "robot");
   config.path =
       parse_path(yaml::require(where, root, "path"), file, "path", config.robot.wheelbase_m);
+  config.world.noise = config.robot.noise;
+  if (const YAML::Node world = root["world"]) {
+    config.world = parse_world(world, file, "world", config.robot.noise);
+  }
+  config.model_effects = config.world.effects;
+  if (const YAML::Node model = root["model"]) {
+    const Where model_where = where.child("model");
+    yaml::require_map(model_where, model, {"effects"});
+    config.model_effects = model["effects"]
+                               ? parse_effects(model["effects"], file, "model.effects")
+                               : EffectList{};
+  }
   if (const YAML::Node sim = root["simulation"]) {
     const Where sim_where = where.child("simulation");
     yaml::require_map(sim_where, sim, {"runs", "seed"});

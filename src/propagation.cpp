@@ -1,10 +1,12 @@
 #include "odomcov/propagation.hpp"
 
 #include <cmath>
+#include <algorithm>
 #include <array>
 #include <complex>
 #include <utility>
 
+#include "effects/effect.hpp"
 #include "series.hpp"
 
 namespace odomcov {
@@ -117,6 +119,23 @@ Complex damped_minus_undamped(double a, double delta) {
   return sum;
 }
 
+/// One piece's share of the noise-induced mean, in the world frame: with heading theta0 + a u,
+/// heading variance V0 + dV u and noise intensity n along the piece,
+///   e^{i theta0} [ int_0^1 e^{i a u} e^{-(V0 + dV u)/2} du (d + i n_td/2) - int_0^1 e^{i a u} du d ]
+/// written as e^{-V0/2} D drive - U d = expm1(-V0/2) D drive + (D - U) drive + U (i n_td/2),
+/// so nothing cancels when the variances are small.
+Complex noise_mean_of_piece(double heading, double d, double a, double v0, double dv,
+                            double n_td) {
+  // U = int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2)
+  const double sinc_half = series::sinc(0.5 * a);
+  const Complex undamped(series::sinc(a), 0.5 * a * sinc_half * sinc_half);
+  const Complex extra = damped_minus_undamped(a, -0.5 * dv);  // D - U
+  const Complex damped = undamped + extra;
+  const Complex drive(d, 0.5 * n_td);
+  return std::polar(1.0, heading) * (std::expm1(-0.5 * v0) * damped * drive + extra * drive +
+                                     undamped * Complex(0.0, 0.5 * n_td));
+}
+
 }  // namespace
 
 Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
@@ -126,23 +145,81 @@ Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
   Complex mean = 0.0;
   for (std::size_t i = 0; i < path.interval_count(); ++i) {
     const ArcSegment seg = path.interval(i);
-    const double d = seg.center_m();
     const double a = seg.heading_change_rad(B);
     const Matrix2 n = wheel_noise_intensity(seg, B, robot.noise);
-    // int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2)
-    const double sinc_half = series::sinc(0.5 * a);
-    const Complex undamped(series::sinc(a), 0.5 * a * sinc_half * sinc_half);
-    const Complex extra = damped_minus_undamped(a, -0.5 * n(0, 0));
-    const Complex damped = undamped + extra;  // int e^{(i a - q/2) u} du
-    const Complex drive(d, 0.5 * n(0, 1));
-    // e^{-V0/2} damped drive - undamped d, without cancellation:
-    const Complex difference = std::expm1(-0.5 * variance) * damped * drive + extra * drive +
-                               undamped * Complex(0.0, 0.5 * n(0, 1));
-    mean += std::polar(1.0, heading) * difference;
+    mean += noise_mean_of_piece(heading, seg.center_m(), a, variance, n(0, 0), n(0, 1));
     heading += a;
     variance += n(0, 0);
   }
   return {mean.real(), mean.imag(), 0.0};
+}
+
+std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m) {
+  std::vector<ArcSegment> pieces;
+  for (std::size_t i = 0; i < path.interval_count(); ++i) {
+    const ArcSegment seg = path.interval(i);
+    const double cuts = std::max({1.0, std::ceil(std::abs(seg.heading_change_rad(wheelbase_m)) / kPieceMaxAngle),
+                                  std::ceil(std::abs(seg.center_m()) / kPieceMaxTravel)});
+    const int n = static_cast<int>(cuts);
+    for (int k = 0; k < n; ++k) pieces.push_back({seg.left_m / n, seg.right_m / n});
+  }
+  return pieces;
+}
+
+Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                   const EffectList& effect_list) {
+  const auto active = effects::instantiate(effect_list);
+  int constants = 0;
+  for (const auto& e : active) constants += e->run_constants();
+  const double B = robot.wheelbase_m;
+
+  Prediction out;
+  Matrix3 P = Matrix3::Zero();                          // tangential, along the true path
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(3, constants);  // cov(e, per-run constants)
+  Vector3 true_pose = Vector3::Zero();
+  Vector3 odometry = Vector3::Zero();
+  Complex noise_mean = 0.0;
+  for (const ArcSegment& encoder : pieces) {
+    effects::PieceModel m;
+    m.encoder = encoder;
+    m.wheelbase_m = B;
+    m.noise = robot.noise;
+    m.wheel_cov.diagonal() << robot.noise.k_left * robot.noise.k_left * std::abs(encoder.left_m),
+        robot.noise.k_right * robot.noise.k_right * std::abs(encoder.right_m);
+    for (const auto& e : active) e->model(m);
+
+    const ArcSegment travel{m.scale_left * encoder.left_m, m.scale_right * encoder.right_m};
+    const double b_true = m.wheelbase_factor * B;
+    const double d = travel.center_m();
+    const double a = travel.heading_change_rad(b_true);
+    Eigen::Matrix2d to_input;  // (e_L, e_R) -> (e_dtheta, e_d)
+    to_input << -1.0 / b_true, 1.0 / b_true, 0.5, 0.5;
+    Matrix2 intensity = to_input * m.wheel_cov * to_input.transpose();
+    intensity(0, 0) += m.heading_var;
+
+    const Matrix3 phi = arc_transition(d, a);
+    const Matrix3 q = arc_noise_covariance(d, a, intensity);
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(3, constants);
+    if (constants > 0) {
+      Eigen::MatrixXd columns(2, constants);
+      for (int c = 0; c < constants; ++c) columns.col(c) = m.run_columns.at(static_cast<std::size_t>(c));
+      A = arc_input_gain(d, a) * to_input * columns;
+    }
+    const double v0 = P(2, 2);
+    const Matrix3 cross = phi * C * A.transpose();
+    P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
+    C = phi * C + A;
+    noise_mean += noise_mean_of_piece(true_pose.z(), d, a, v0, P(2, 2) - v0, intensity(0, 1));
+    true_pose = compose(true_pose, arc_displacement(d, a));
+    odometry = drive(odometry, encoder, B);
+  }
+  out.odometry_end_pose = odometry;
+  out.true_end_pose = true_pose;
+  out.mean = {true_pose.x() - odometry.x(), true_pose.y() - odometry.y(),
+              wrap_angle(true_pose.z() - odometry.z())};
+  out.noise_mean = {noise_mean.real(), noise_mean.imag(), 0.0};
+  out.cov = tangential_to_world(P, true_pose.z());
+  return out;
 }
 
 }  // namespace odomcov

@@ -9,8 +9,9 @@
 // the attempt number k >= 1 of a ziggurat retry (k = 0 is the first draw). Bases:
 //   kTagWheelNoise       the two wheel normals of each sample (128 bits, one per 64)
 //   kTagWheelRetry + w   retries of the normal of wheel w (0 left, 1 right)
-//   kTagEffect + e       per-sample draws of effect slot e (see effects.hpp)
-//   kTagPerRun + e       per-run draws of effect slot e (the counter's sample = draw number)
+//   kTagEffect | e << 8 | i   per-sample draw i (< 256) of effect slot e (< 16)
+//   kTagPerRun | e << 8       per-run draws of effect slot e (the counter's sample = draw number)
+//   kTagMeasurement           measurement noise of synthesised suites
 #pragma once
 
 #include <Random123/philox.h>
@@ -24,10 +25,25 @@ using Philox = r123::Philox4x32;  // 10 rounds
 
 inline constexpr std::uint32_t kTagWheelNoise = 0;
 inline constexpr std::uint32_t kTagWheelRetry = 1;     // + wheel
-inline constexpr std::uint32_t kTagEffect = 0x100;     // + effect slot
-inline constexpr std::uint32_t kTagPerRun = 0x200;     // + effect slot
+inline constexpr std::uint32_t kTagEffect = 0x10000;
+inline constexpr std::uint32_t kTagPerRun = 0x20000;
+inline constexpr std::uint32_t kTagMeasurement = 0x30000;
+inline constexpr std::uint32_t kMaxEffectSlots = 16;
 inline constexpr int kRetryShift = 24;
 inline constexpr std::uint32_t kMaxRetries = 255;
+
+/// SplitMix64 [Steele14]: a bijective 64-bit mixer.
+inline std::uint64_t splitmix64(std::uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+/// The seed of the i-th independent job (a sweep point, a synthesised experiment) of `seed`.
+inline std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t i) {
+  return splitmix64(seed ^ splitmix64(i));
+}
 
 inline Philox::key_type key_from_seed(std::uint64_t seed) {
   return {{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32)}};

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "effects/effect.hpp"
 #include "random.hpp"
 
 namespace odomcov {
@@ -44,6 +45,8 @@ constexpr double kSinc1 = -1.0 / 6, kSinc2 = 1.0 / 120, kSinc3 = -1.0 / 5040,
 /// A stretch of samples with one encoder increment, with everything the step needs.
 struct Leg {
   std::int64_t count = 0;
+  ArcSegment encoder;        // encoder increment per sample
+  ArcSegment travel;         // systematic true travel per sample (effects' scales applied)
   double center_m = 0.0;   // (L + R)/2 per sample
   double half_rad = 0.0;   // h0 = (R - L)/(2B) per sample
   double cos_half = 1.0;
@@ -187,30 +190,49 @@ inline __attribute__((always_inline)) VecD normals(VecU bits, const VecU& run,
 
 struct Simulator::Impl {
   Robot robot;
-  std::vector<Leg> legs;
+  std::vector<Leg> legs;           // the true motion: systematic effects folded in
+  std::vector<std::unique_ptr<effects::Effect>> effects;
+  bool stochastic = false;         // some effect needs the general kernel
+  double wheelbase_true = 0.0;
   std::int64_t samples = 0;
   Vector3 odometry_pose = Vector3::Zero();
 
-  Impl(const Robot& r, const Path& path) : robot(r) {
-    const double B = robot.wheelbase_m;
+  static std::vector<Leg> make_legs(const Path& path, const Robot& robot, double scale_left,
+                                    double scale_right, double wheelbase_true) {
+    std::vector<Leg> out;
     for (const SampleRun& run : sample_schedule(path)) {
       Leg leg;
       leg.count = run.count;
-      leg.center_m = run.increment.center_m();
-      leg.half_rad = 0.5 * run.increment.heading_change_rad(B);
+      leg.encoder = run.increment;
+      leg.travel = {scale_left * run.increment.left_m, scale_right * run.increment.right_m};
+      leg.center_m = leg.travel.center_m();
+      leg.half_rad = 0.5 * leg.travel.heading_change_rad(wheelbase_true);
       leg.cos_half = std::cos(leg.half_rad);
       leg.sin_half = std::sin(leg.half_rad);
       leg.sigma_left = robot.noise.k_left * std::sqrt(std::abs(run.increment.left_m));
       leg.sigma_right = robot.noise.k_right * std::sqrt(std::abs(run.increment.right_m));
-      leg.inv_two_b = 1.0 / (2.0 * B);
+      leg.inv_two_b = 1.0 / (2.0 * wheelbase_true);
       leg.series_sinc = std::abs(leg.half_rad) <= kSincSeriesMax;
-      legs.push_back(leg);
-      samples += run.count;
+      out.push_back(leg);
     }
-    // The odometry: the same integrator with zero noise, so k = 0 gives exactly zero error.
+    return out;
+  }
+
+  Impl(const Robot& r, const Path& path, const EffectList& effect_list)
+      : robot(r), effects(effects::instantiate(effect_list)) {
+    double scale_left = 1.0, scale_right = 1.0, wheelbase_factor = 1.0;
+    for (const auto& e : effects) {
+      e->systematic(scale_left, scale_right, wheelbase_factor);
+      stochastic = stochastic || e->stochastic();
+    }
+    wheelbase_true = wheelbase_factor * robot.wheelbase_m;
+    legs = make_legs(path, robot, scale_left, scale_right, wheelbase_true);
+    for (const Leg& leg : legs) samples += leg.count;
+    // The odometry: the nominal motion through the same integrator with zero noise, so with
+    // no effects and k = 0 the error is exactly zero.
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
     std::uint32_t n = 0;
-    for (const Leg& leg : legs) {
+    for (const Leg& leg : make_legs(path, robot, 1.0, 1.0, robot.wheelbase_m)) {
       for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
         step(p, leg, 0.0, 0.0);
         if ((n & kRenormMask) == kRenormMask) renormalise(p);
@@ -223,19 +245,53 @@ struct Simulator::Impl {
     return {x - odometry_pose.x(), y - odometry_pose.y(), wrap_angle(theta - odometry_pose.z())};
   }
 
+  /// The scalar kernel: the reference for the vectorised one and, with stochastic effects,
+  /// the general kernel. Effects see each sample after the wheel normals are drawn.
   Vector3 scalar_run(const random::Philox::key_type& key, std::uint64_t run) const {
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
+    std::vector<effects::Draws> draws;
+    std::vector<effects::RunState> states(effects.size());
+    for (std::size_t e = 0; e < effects.size(); ++e) {
+      draws.emplace_back(key, run, static_cast<std::uint32_t>(e));
+      effects[e]->begin_run(states[e], draws[e]);
+    }
     std::uint32_t n = 0;
     for (const Leg& leg : legs) {
       for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
         const random::Bits128 b = random::draw(key, run, n, random::kTagWheelNoise);
-        const double zl = random::normal(b.lo, key, run, n, random::kTagWheelRetry + 0);
-        const double zr = random::normal(b.hi, key, run, n, random::kTagWheelRetry + 1);
-        step(p, leg, leg.sigma_left * zl, leg.sigma_right * zr);
+        double zl = random::normal(b.lo, key, run, n, random::kTagWheelRetry + 0);
+        double zr = random::normal(b.hi, key, run, n, random::kTagWheelRetry + 1);
+        double noise_l, noise_r;
+        if (stochastic) {
+          for (const auto& e : effects) e->shape_noise(zl, zr);
+          effects::WorldSample ws;
+          ws.index = n;
+          ws.encoder_left = leg.encoder.left_m;
+          ws.encoder_right = leg.encoder.right_m;
+          ws.wheelbase_nominal = robot.wheelbase_m;
+          ws.travel_left = leg.travel.left_m;
+          ws.travel_right = leg.travel.right_m;
+          ws.wheelbase = wheelbase_true;
+          for (std::size_t e = 0; e < effects.size(); ++e) {
+            effects[e]->perturb(ws, states[e], draws[e]);
+          }
+          noise_l = leg.sigma_left * zl + ws.extra_left;
+          noise_r = leg.sigma_right * zr + ws.extra_right;
+        } else {
+          noise_l = leg.sigma_left * zl;
+          noise_r = leg.sigma_right * zr;
+        }
+        step(p, leg, noise_l, noise_r);
         if ((n & kRenormMask) == kRenormMask) renormalise(p);
       }
     }
     return error_of(p.x, p.y, p.theta);
+  }
+
+  /// Runs first .. first+kLanes-1: vectorised, or the general kernel run by run.
+  void group(const random::Philox::key_type& key, std::uint64_t first, Vector3* out) const {
+    if (!stochastic) return vector_group(key, first, out);
+    for (int j = 0; j < kLanes; ++j) out[j] = scalar_run(key, first + static_cast<std::uint64_t>(j));
   }
 
   void vector_group(const random::Philox::key_type& key, std::uint64_t first,
@@ -307,8 +363,8 @@ Simulator::Impl::vector_group(const random::Philox::key_type& key, std::uint64_t
   for (int j = 0; j < kLanes; ++j) out[j] = error_of(p.x[j], p.y[j], p.theta[j]);
 }
 
-Simulator::Simulator(const Robot& robot, const Path& path)
-    : impl_(std::make_unique<Impl>(robot, path)) {}
+Simulator::Simulator(const Robot& robot, const Path& path, const EffectList& effects)
+    : impl_(std::make_unique<Impl>(robot, path, effects)) {}
 Simulator::~Simulator() = default;
 Simulator::Simulator(Simulator&&) noexcept = default;
 Simulator& Simulator::operator=(Simulator&&) noexcept = default;
@@ -350,7 +406,7 @@ MomentAccumulator Simulator::simulate(std::int64_t runs, std::uint64_t seed, int
           for (std::int64_t g = r.begin(); g != r.end(); ++g) {
             if (progress && progress->cancel.load(std::memory_order_relaxed)) break;
             const std::int64_t first = g * kLanes;
-            impl_->vector_group(key, static_cast<std::uint64_t>(first), errors);
+            impl_->group(key, static_cast<std::uint64_t>(first), errors);
             const std::int64_t valid = std::min<std::int64_t>(kLanes, runs - first);
             for (std::int64_t j = 0; j < valid; ++j) acc.add(errors[j]);
             if (progress) progress->runs_done.fetch_add(valid, std::memory_order_relaxed);
@@ -375,8 +431,7 @@ std::vector<Vector3> Simulator::errors(std::uint64_t seed, std::int64_t first, s
                         Vector3 errors[kLanes];
                         for (std::int64_t g = r.begin(); g != r.end(); ++g) {
                           const std::int64_t offset = g * kLanes;
-                          impl_->vector_group(key, static_cast<std::uint64_t>(first + offset),
-                                              errors);
+                          impl_->group(key, static_cast<std::uint64_t>(first + offset), errors);
                           const std::int64_t valid = std::min<std::int64_t>(kLanes, count - offset);
                           for (std::int64_t j = 0; j < valid; ++j) {
                             out[static_cast<std::size_t>(offset + j)] = errors[j];

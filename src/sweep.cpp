@@ -5,20 +5,13 @@
 #include <cmath>
 #include <filesystem>
 
+#include "random.hpp"
 #include "yaml_util.hpp"
 
 namespace odomcov {
 namespace {
 
 using yaml::Where;
-
-/// SplitMix64 [Steele14]: a bijective mixer, so distinct (seed, i) give well-spread seeds.
-std::uint64_t splitmix64(std::uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
 
 std::vector<std::string> split_dotted(const std::string& key) {
   std::vector<std::string> parts;
@@ -36,9 +29,10 @@ bool is_index(const std::string& s) {
   return !s.empty() && s.find_first_not_of("0123456789") == std::string::npos;
 }
 
-/// Sets the numeric value at a dotted key. Maps are entered by key (created if absent, so the
-/// config parser can reject unknown keys); lists by index, or by the name of the single-key
-/// map they hold (effects: "world.effects.wheel_diameter_ratio.Ed"). Returns an error or "".
+/// Sets the numeric value at a dotted key. Maps are entered by key and lists by index, or by
+/// the name of the single-key map they hold (effects: "world.effects.wheel_diameter_ratio.Ed").
+/// Every part but the last must exist in the base; the last may be new (the config parser then
+/// rejects it if it is not a valid key). Returns an error or "".
 std::string set_dotted(YAML::Node root, const std::string& key, double value) {
   const std::vector<std::string> parts = split_dotted(key);
   YAML::Node node = root;
@@ -68,11 +62,16 @@ std::string set_dotted(YAML::Node root, const std::string& key, double value) {
       node.reset(next);
       continue;
     }
-    if (!node.IsMap() && !node.IsNull()) return "'" + part + "' is not inside a map";
+    if (!node.IsMap()) return "'" + part + "' is not inside a map";
     if (last) {
       if (node[part] && !node[part].IsScalar()) return "'" + part + "' is not a number";
       node[part] = value;
       return "";
+    }
+    if (!node[part]) {
+      std::string prefix;
+      for (std::size_t j = 0; j <= i; ++j) prefix += (j ? "." : "") + parts[j];
+      return "the base config has no '" + prefix + "'";
     }
     YAML::Node next = node[part];
     node.reset(next);
@@ -98,7 +97,7 @@ std::vector<double> SweepPlan::point_values(std::size_t i) const {
 }
 
 std::uint64_t SweepPlan::point_seed(std::size_t i) const {
-  return splitmix64(seed ^ splitmix64(static_cast<std::uint64_t>(i)));
+  return random::derive_seed(seed, static_cast<std::uint64_t>(i));
 }
 
 Config SweepPlan::point_config(std::size_t i) const {

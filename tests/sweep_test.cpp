@@ -71,6 +71,16 @@ TEST(Sweep, MetricsFollowTheirDefinitions) {
   EXPECT_NEAR(m.max_corr_diff, 0.5, 1e-12);
 }
 
+TEST(Sweep, AxesReachIntoEffectLists) {
+  // By the effect's name in a list, or by index; the model keeps its own list.
+  const SweepPlan plan = load_sweep(ODOMCOV_SOURCE_DIR "/tests/data/sweep/effect_axis.yaml");
+  const Config c = plan.point_config(1);
+  ASSERT_EQ(c.world.effects.size(), 1u);
+  EXPECT_EQ(c.world.effects[0].values[0], 1.01);
+  ASSERT_EQ(c.model_effects.size(), 1u);
+  EXPECT_EQ(c.model_effects[0].values[0], 1.0);
+}
+
 TEST(Sweep, BadGridValuesNameTheSweepFile) {
   try {
     load_sweep(ODOMCOV_SOURCE_DIR "/tests/data/sweep/bad_value.yaml");

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "odomcov/closed_form.hpp"
+#include "odomcov/effects.hpp"
 #include "odomcov/path.hpp"
 
 namespace odomcov {
@@ -47,6 +48,36 @@ Matrix3 sampled_covariance(const Path& path, const Robot& robot);
 /// exact in the heading variance and first order in the along-track noise; the sampled
 /// simulation adds O(1/f). World frame, error = true - odometry.
 Vector3 noise_induced_mean(const Path& path, const Robot& robot);
+
+/// The model's prediction of the end-pose error (world frame, error = true - odometry).
+struct Prediction {
+  Vector3 mean = Vector3::Zero();        // from systematic effects: exact (perturbed path)
+  Vector3 noise_mean = Vector3::Zero();  // noise-induced, beyond first order (see above)
+  Matrix3 cov = Matrix3::Zero();         // first order, along the true (perturbed) path
+  Vector3 odometry_end_pose = Vector3::Zero();
+  Vector3 true_end_pose = Vector3::Zero();  // mean true pose (systematic effects only)
+};
+
+/// The general linearised propagation engine: any sequence of constant-curvature pieces
+/// (keyframe intervals, or one piece per sample of a logged run) with any model effects.
+///  * Systematic effects move the true path; the mean is that path's end pose minus the
+///    odometry's, computed exactly.
+///  * White noise (the robot's, and the effects' extra wheel and heading variance) adds
+///    arc_noise_covariance per piece, with the piece's noise intensity.
+///  * Per-run random constants (e.g. per_run_radius) are carried as augmented state with their
+///    cross-covariance: e_end = Phi e + A c + w, A = arc_input_gain * (their wheel columns).
+///  * The noise-induced mean uses the heading variance V(u) the propagation itself carries
+///    (linear within a piece).
+/// With no effects the covariance is exactly the composed closed form.
+Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                   const EffectList& effects);
+
+/// The pieces the engine uses for a keyframe path: each interval cut so that no piece turns
+/// more than kPieceMaxAngle or travels more than kPieceMaxTravel, which only refines the
+/// piecewise-linear V(u) of the noise-induced mean (the covariance does not change).
+inline constexpr double kPieceMaxAngle = 0.25;   // rad
+inline constexpr double kPieceMaxTravel = 0.25;  // m
+std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m);
 
 /// d(arc_displacement)/d(angle, center), rotated into the end frame of the sample.
 Matrix32 arc_increment_jacobian(double center_m, double angle_rad);

@@ -13,6 +13,7 @@
 #include <memory>
 #include <vector>
 
+#include "odomcov/effects.hpp"
 #include "odomcov/path.hpp"
 #include "odomcov/statistics.hpp"
 
@@ -27,7 +28,10 @@ struct Progress {
 
 class Simulator {
  public:
-  Simulator(const Robot& robot, const Path& path);
+  /// `robot`: nominal wheelbase (the odometry's) with the world's wheel noise constants;
+  /// `effects`: the world's effects. Systematic effects are folded into the path; stochastic
+  /// ones (noise correlation, slip, per-run radius, bumps) run in a general scalar kernel.
+  Simulator(const Robot& robot, const Path& path, const EffectList& effects = {});
   ~Simulator();
   Simulator(Simulator&&) noexcept;
   Simulator& operator=(Simulator&&) noexcept;
@@ -42,7 +46,7 @@ class Simulator {
                               int threads = 0) const;
 
   /// The error of one run by the scalar reference kernel, which the vectorised kernel must
-  /// match bit for bit.
+  /// match bit for bit (with stochastic effects, the general kernel is the only one).
   Vector3 reference_error(std::uint64_t seed, std::int64_t run) const;
 
   /// Odometry (noise-free) end pose, integrated sample by sample like the true pose.

@@ -29,7 +29,7 @@ struct Validation {
   // the noise-induced mean of propagation.hpp with the chi^2 mean test against it, and the
   // first-order covariance of the sampled odometry ([Wang88], sampled_covariance) with the
   // covariance test against it, which accounts for noise lumped per sample at low rates.
-  Vector3 noise_induced_mean = Vector3::Zero();
+  Vector3 noise_induced_mean = Vector3::Zero();  // added to theory_mean for its test
   TestResult noise_induced_mean_test;
   Matrix3 sampled_cov = Matrix3::Zero();
   TestResult sampled_cov_test;

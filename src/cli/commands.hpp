@@ -17,6 +17,7 @@ inline constexpr int kExitBadInput = 2;
 void setup_theory(CLI::App& app, int& exit_code);
 void setup_run(CLI::App& app, int& exit_code);
 void setup_sweep(CLI::App& app, int& exit_code);
+void setup_synth(CLI::App& app, int& exit_code);
 
 /// The JSON of `run` (SPEC "JSON of run"), shared with `sweep`.
 nlohmann::json validation_json(const std::string& name, const Validation& v);

@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   setup_theory(app, exit_code);
   setup_run(app, exit_code);
   setup_sweep(app, exit_code);
+  setup_synth(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -1,0 +1,56 @@
+// Physical effects (../shared/SPEC.md, "Effect catalogue"): what a real robot does beyond white
+// wheel noise. Each effect has a world side (the simulator's exact perturbation) and a model
+// side (its first-order contribution to the predicted mean and covariance). The catalogue and
+// its implementations live in src/effects/, one file per effect.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace odomcov {
+
+/// One effect with its parameter values, in the catalogue's parameter order.
+struct EffectSpec {
+  std::string name;
+  std::vector<double> values;
+
+  bool operator==(const EffectSpec& other) const {
+    return name == other.name && values == other.values;
+  }
+};
+using EffectList = std::vector<EffectSpec>;
+
+struct EffectParameterInfo {
+  std::string name;
+  std::string unit;
+  double lower = 0.0;  // valid values lie between lower and upper
+  double upper = 0.0;
+  bool open_lower = false;  // lower itself excluded
+  bool open_upper = false;
+  double neutral = 0.0;  // the value at which the effect does nothing
+  double typical = 0.0;  // a moderate size, e.g. for starting a fit
+};
+
+struct EffectInfo {
+  std::string name;
+  std::vector<EffectParameterInfo> parameters;
+  std::string physics;    // what it is, in plain words
+  std::string signature;  // how it shows in the data
+  std::string summary;    // the SPEC catalogue's one-line definition
+};
+
+/// Every effect of the catalogue, in SPEC order.
+const std::vector<EffectInfo>& effect_catalogue();
+/// nullptr when unknown.
+const EffectInfo* find_effect(const std::string& name);
+
+/// "" when the values are valid for the effect, else what is wrong ("Ed must be > 0").
+std::string check_effect(const EffectSpec& spec);
+
+/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}".
+std::string effect_yaml(const EffectSpec& spec);
+
+/// True when the effect needs per-sample or per-run randomness in the simulator.
+bool effects_are_stochastic(const EffectList& effects);
+
+}  // namespace odomcov

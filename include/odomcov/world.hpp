@@ -1,0 +1,52 @@
+// World files and `synth`: a simulated lab. A world file names the nominal robot, the world's
+// hidden effects (and, optionally, its true wheel noise), the measurement noise of the external
+// reference and a list of experiments; synth drives them and writes the measurement suite a
+// lab would have, with no trace of the hidden effects.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "odomcov/config.hpp"
+#include "odomcov/suite.hpp"
+
+namespace YAML {
+class Node;
+}
+
+namespace odomcov {
+
+struct WorldExperiment {
+  std::string name;
+  std::int64_t runs = 0;
+  Path path;
+  std::shared_ptr<const YAML::Node> path_node;  // as written, to copy into the suite
+};
+
+struct WorldFile {
+  std::string file;
+  std::string name;
+  Robot robot;  // the nominal robot: the suite's model
+  World world;  // the truth
+  MeasurementNoise measurement_noise;
+  std::uint64_t seed = 1;
+  std::vector<WorldExperiment> experiments;
+};
+
+/// Reads and validates a world file (SPEC-style errors).
+WorldFile load_world(const std::string& file);
+
+/// The measured end poses (start frame) of experiment i: odometry end pose + simulated error,
+/// plus measurement noise. Experiment i uses a seed derived from (seed, i).
+std::vector<Vector3> synthesize(const WorldFile& world, std::size_t experiment, int threads = 0);
+
+/// The suite.yaml text for the synthesised data: nominal robot, measurement noise and the
+/// experiments with their paths and CSV names (<name>.csv).
+std::string suite_yaml(const WorldFile& world);
+
+/// The measurements CSV (run,x,y,theta) of one experiment.
+std::string measurements_csv(const std::vector<Vector3>& measured);
+
+}  // namespace odomcov

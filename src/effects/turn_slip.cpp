@@ -1,0 +1,47 @@
+// turn_slip {k} [rad^(1/2)]: extra opposite-signed slip of the two wheels while turning,
+// distance unchanged: each sample's heading changes by an extra eta ~ N(0, k^2 |dtheta|),
+// dtheta = (dR - dL)/B the encoder heading change. World: eta moves the wheels by -/+ eta B'/2
+// (B' the true wheelbase, so the heading changes by exactly eta). Model: white heading
+// variance k^2 |R - L|/B over a piece.
+#include <cmath>
+
+#include "effect.hpp"
+
+namespace odomcov::effects {
+namespace {
+
+class TurnSlip final : public Effect {
+ public:
+  explicit TurnSlip(double k) : k_(k) {}
+  bool stochastic() const override { return true; }
+  void perturb(WorldSample& s, RunState&, const Draws& draws) const override {
+    const double turned = std::abs(s.encoder_right - s.encoder_left) / s.wheelbase_nominal;
+    if (turned == 0.0 || k_ == 0.0) return;
+    const double eta = k_ * std::sqrt(turned) * draws.normal(s.index, 0);
+    s.extra_left -= 0.5 * eta * s.wheelbase;
+    s.extra_right += 0.5 * eta * s.wheelbase;
+  }
+  void model(PieceModel& piece) const override {
+    piece.heading_var +=
+        k_ * k_ * std::abs(piece.encoder.right_m - piece.encoder.left_m) / piece.wheelbase_m;
+  }
+
+ private:
+  double k_;
+};
+
+}  // namespace
+
+EffectType turn_slip_type() {
+  return {{"turn_slip",
+           {{"k", "rad^(1/2)", 0.0, 1e300, false, false, 0.0, 0.01}},
+           "wheels slipping sideways against each other while the robot turns",
+           "extra heading variance in proportion to the angle turned; straight lines and the "
+           "mean unaffected",
+           "extra heading variance k^2 |dtheta| per sample"},
+          [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
+            return std::make_unique<TurnSlip>(v[0]);
+          }};
+}
+
+}  // namespace odomcov::effects

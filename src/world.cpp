@@ -1,0 +1,134 @@
+#include "odomcov/world.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <regex>
+#include <set>
+
+#include "odomcov/simulator.hpp"
+#include "random.hpp"
+#include "yaml_util.hpp"
+
+namespace odomcov {
+namespace {
+
+using yaml::Where;
+constexpr double kDegToRad = M_PI / 180.0;
+
+std::string full_precision(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+}  // namespace
+
+WorldFile load_world(const std::string& file) {
+  const YAML::Node root = yaml::load_file(file);
+  const Where where{file, ""};
+  yaml::require_map(where, root,
+                    {"name", "robot", "world", "measurement_noise", "seed", "experiments"});
+  WorldFile w;
+  w.file = file;
+  w.name = root["name"] ? yaml::to_string(where.child("name"), root["name"])
+                        : std::filesystem::path(file).stem().string();
+  w.robot = parse_robot(yaml::require(where, root, "robot"), file, "robot");
+  w.world.noise = w.robot.noise;
+  if (root["world"]) w.world = parse_world(root["world"], file, "world", w.robot.noise);
+  if (const YAML::Node noise = root["measurement_noise"]) {
+    const Where nw = where.child("measurement_noise");
+    yaml::require_map(nw, noise, {"xy", "theta_deg"});
+    w.measurement_noise.xy_m = yaml::optional_number(nw, noise, "xy").value_or(0.0);
+    w.measurement_noise.theta_rad =
+        yaml::optional_number(nw, noise, "theta_deg").value_or(0.0) * kDegToRad;
+    if (w.measurement_noise.xy_m < 0) yaml::fail(nw.child("xy"), noise["xy"], "must be >= 0");
+    if (w.measurement_noise.theta_rad < 0) {
+      yaml::fail(nw.child("theta_deg"), noise["theta_deg"], "must be >= 0");
+    }
+  }
+  if (root["seed"]) w.seed = yaml::to_unsigned(where.child("seed"), root["seed"]);
+  const Where ew = where.child("experiments");
+  const YAML::Node list = yaml::require(where, root, "experiments");
+  yaml::require_sequence(ew, list);
+  if (list.size() == 0) yaml::fail(ew, list, "need at least one experiment");
+  static const std::regex safe_name("[A-Za-z0-9_.-]+");
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const Where xw = ew.index(i);
+    const YAML::Node node = list[i];
+    yaml::require_map(xw, node, {"name", "runs", "path"});
+    WorldExperiment ex;
+    ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
+    if (!std::regex_match(ex.name, safe_name)) {
+      yaml::fail(xw.child("name"), node["name"], "use letters, digits, '_', '.' or '-' (it names a file)");
+    }
+    if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate name");
+    ex.runs = yaml::to_integer(xw.child("runs"), yaml::require(xw, node, "runs"), 2, 1'000'000);
+    ex.path = parse_path(yaml::require(xw, node, "path"), file, xw.child("path").key,
+                         w.robot.wheelbase_m);
+    check_simulation_size(file, yaml::line_of(node["runs"]), xw.child("runs").key, ex.runs,
+                          sample_count(ex.path));
+    ex.path_node = std::make_shared<const YAML::Node>(YAML::Clone(node["path"]));
+    w.experiments.push_back(std::move(ex));
+  }
+  return w;
+}
+
+std::vector<Vector3> synthesize(const WorldFile& w, std::size_t experiment, int threads) {
+  const WorldExperiment& ex = w.experiments.at(experiment);
+  const std::uint64_t seed = random::derive_seed(w.seed, experiment);
+  const Simulator simulator({w.robot.wheelbase_m, w.world.noise}, ex.path, w.world.effects);
+  const std::vector<Vector3> errors = simulator.errors(seed, 0, ex.runs, threads);
+  const Vector3 odometry = simulator.odometry_end_pose();
+  const auto key = random::key_from_seed(seed);
+  const Vector3 sigma(w.measurement_noise.xy_m, w.measurement_noise.xy_m,
+                      w.measurement_noise.theta_rad);
+  std::vector<Vector3> measured;
+  for (std::size_t r = 0; r < errors.size(); ++r) {
+    Vector3 pose = odometry + errors[r];
+    for (std::uint32_t c = 0; c < 3; ++c) {
+      if (sigma(c) > 0) pose(c) += sigma(c) * random::normal_at(key, r, c, random::kTagMeasurement);
+    }
+    pose.z() = wrap_angle(pose.z());
+    measured.push_back(pose);
+  }
+  return measured;
+}
+
+std::string suite_yaml(const WorldFile& w) {
+  YAML::Emitter out;
+  out.SetDoublePrecision(15);  // round-trips any value typed with up to 15 digits
+  out << YAML::Comment("Measurement suite written by `odomcov synth` from " +
+                       std::filesystem::path(w.file).filename().string())
+      << YAML::BeginMap;
+  out << YAML::Key << "name" << YAML::Value << w.name;
+  out << YAML::Key << "robot" << YAML::Value << YAML::Flow << YAML::BeginMap
+      << YAML::Key << "wheelbase" << YAML::Value << w.robot.wheelbase_m << YAML::Key << "k_left"
+      << YAML::Value << w.robot.noise.k_left << YAML::Key << "k_right" << YAML::Value
+      << w.robot.noise.k_right << YAML::EndMap;
+  out << YAML::Key << "measurement_noise" << YAML::Value << YAML::Flow << YAML::BeginMap
+      << YAML::Key << "xy" << YAML::Value << w.measurement_noise.xy_m << YAML::Key << "theta_deg"
+      << YAML::Value << w.measurement_noise.theta_rad / kDegToRad << YAML::EndMap;
+  out << YAML::Key << "experiments" << YAML::Value << YAML::BeginSeq;
+  for (const WorldExperiment& ex : w.experiments) {
+    out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << ex.name << YAML::Key << "path"
+        << YAML::Value << *ex.path_node << YAML::Key << "measurements" << YAML::Value
+        << ex.name + ".csv" << YAML::EndMap;
+  }
+  out << YAML::EndSeq << YAML::EndMap;
+  return std::string(out.c_str()) + "\n";
+}
+
+std::string measurements_csv(const std::vector<Vector3>& measured) {
+  std::string text = "run,x,y,theta\n";
+  for (std::size_t r = 0; r < measured.size(); ++r) {
+    text += std::to_string(r + 1) + "," + full_precision(measured[r].x()) + "," +
+            full_precision(measured[r].y()) + "," + full_precision(measured[r].z()) + "\n";
+  }
+  return text;
+}
+
+}  // namespace odomcov

@@ -1,0 +1,121 @@
+// Every effect's two sides agree: a world with the effect against a model with it passes the run
+// tests at alpha = 0.001 (fixed seeds), and the same world against the plain model is rejected,
+// which shows the tests have the power to see the effect. Plus properties of the engine.
+#include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
+#include <random>
+
+#include "odomcov/config.hpp"
+#include "odomcov/error.hpp"
+#include "odomcov/propagation.hpp"
+#include "odomcov/validation.hpp"
+#include "test_util.hpp"
+
+namespace odomcov {
+namespace {
+
+constexpr double kAlpha = 1e-3;
+
+class EffectConfig : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(EffectConfig, ModelWithTheEffectPassesAndWithoutIsRejected) {
+  const Config config = load_config(ODOMCOV_SOURCE_DIR "/configs/effects/" + GetParam() + ".yaml");
+  ASSERT_EQ(config.world.effects.size(), 1u);
+  ASSERT_EQ(config.world.effects[0].name, GetParam());
+  const Validation with = validate(config, kAlpha);
+  // First order is the right reference here: the noise-induced mean is < 0.5 standard errors.
+  const Vector3 b = with.noise_induced_mean;
+  ASSERT_LT(b.dot(with.theory_cov.llt().solve(b)) * static_cast<double>(with.runs), 0.25)
+      << GetParam() << ": effect too large for first-order theory at this run count";
+  EXPECT_EQ(with.verdict, "consistent")
+      << GetParam() << ": p_mean " << with.mean_test.p_value << ", p_cov " << with.cov_test.p_value;
+
+  Config plain = config;
+  plain.model_effects.clear();
+  const Validation without = validate(plain, kAlpha);
+  EXPECT_EQ(without.simulation.mean, with.simulation.mean);  // the same simulated world
+  EXPECT_EQ(without.verdict, "inconsistent")
+      << GetParam() << ": p_mean " << without.mean_test.p_value << ", p_cov "
+      << without.cov_test.p_value;
+}
+
+INSTANTIATE_TEST_SUITE_P(Catalogue, EffectConfig,
+                         ::testing::Values("wheel_diameter_ratio", "wheelbase_error",
+                                           "scale_error", "wheel_noise_correlation", "turn_slip",
+                                           "per_run_radius", "bumps"));
+
+TEST(Effects, CatalogueMatchesSpec) {
+  std::vector<std::string> names;
+  for (const EffectInfo& e : effect_catalogue()) names.push_back(e.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"wheel_diameter_ratio", "wheelbase_error",
+                                             "scale_error", "wheel_noise_correlation",
+                                             "turn_slip", "per_run_radius", "bumps"}));
+  EXPECT_EQ(find_effect("bumps")->parameters[0].name, "rate");
+  EXPECT_EQ(find_effect("bumps")->parameters[1].name, "sigma");
+  EXPECT_EQ(check_effect({"wheel_noise_correlation", {1.0}}), "rho must be in (-1, 1), got 1");
+  EXPECT_EQ(effect_yaml({"wheel_diameter_ratio", {1.0041}}),
+            "- wheel_diameter_ratio: {Ed: 1.0041}");
+}
+
+TEST(Engine, NoEffectsReproducesTheClosedForm) {
+  std::mt19937_64 rng(55);
+  for (int trial = 0; trial < 30; ++trial) {
+    const test::RandomCase c = test::random_case(rng);
+    const Prediction p = predict(model_pieces(c.path, c.robot.wheelbase_m), c.robot, {});
+    EXPECT_EQ(p.mean, Vector3::Zero());
+    EXPECT_LT(test::max_rel_diff(p.cov, path_covariance(c.path, c.robot).end().P_world), 1e-12);
+    const Vector3 nm = noise_induced_mean(c.path, c.robot);
+    EXPECT_LT((p.noise_mean - nm).norm(), 1e-12 * nm.norm());
+  }
+}
+
+TEST(Engine, SplittingPiecesDoesNotChangeThePrediction) {
+  // Consistency with every effect present at once, including per-run constants.
+  std::mt19937_64 rng(56);
+  const EffectList all{{"wheel_diameter_ratio", {1.003}}, {"wheelbase_error", {0.99}},
+                       {"scale_error", {1.002}},          {"wheel_noise_correlation", {-0.3}},
+                       {"turn_slip", {0.02}},             {"per_run_radius", {0.002}},
+                       {"bumps", {0.5, 0.003}}};
+  for (int trial = 0; trial < 30; ++trial) {
+    const test::RandomCase c = test::random_case(rng);
+    const Prediction whole = predict(model_pieces(c.path, c.robot.wheelbase_m), c.robot, all);
+    std::vector<ArcSegment> fine;
+    for (const ArcSegment& s : model_pieces(c.path, c.robot.wheelbase_m)) {
+      for (int k = 0; k < 7; ++k) fine.push_back({s.left_m / 7, s.right_m / 7});
+    }
+    const Prediction split = predict(fine, c.robot, all);
+    EXPECT_LT(test::max_rel_diff(split.cov, whole.cov), 1e-10) << "trial " << trial;
+    EXPECT_LT((split.mean - whole.mean).norm(), 1e-10 * (1 + whole.mean.norm()));
+  }
+}
+
+TEST(Engine, SystematicMeanIsThePerturbedPath) {
+  // Ed and Eb move the true path; the predicted mean is its end pose minus the odometry's.
+  const Path path{50.0, {{0, 0, 0}, {4, 2.0, 2.0}, {6, 1.5, 2.7}}};
+  const Robot robot{0.4, {1e-3, 1e-3}};
+  const double ed = 1.01, eb = 0.98;
+  const Prediction p = predict(model_pieces(path, 0.4), robot,
+                               {{"wheel_diameter_ratio", {ed}}, {"wheelbase_error", {eb}}});
+  Vector3 truth = Vector3::Zero();
+  for (std::size_t i = 0; i < path.interval_count(); ++i) {
+    const ArcSegment s = path.interval(i);
+    truth = drive(truth, {s.left_m * 2 / (ed + 1), s.right_m * 2 * ed / (ed + 1)}, eb * 0.4);
+  }
+  const Vector3 odo = path_end_pose(path, 0.4);
+  EXPECT_LT((p.mean - (truth - odo)).norm(), 1e-12);
+}
+
+TEST(Effects, BadEffectsAreRejectedWithTheirKey) {
+  const std::string dir = ODOMCOV_SOURCE_DIR "/tests/data/bad/";
+  try {
+    load_config(dir + "effect_out_of_range.yaml");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.key(), "world.effects[1].wheel_noise_correlation.rho");
+    EXPECT_EQ(e.line(), 12);
+  }
+}
+
+}  // namespace
+}  // namespace odomcov
