@@ -2,7 +2,7 @@
 # Regenerates everything in results/ (see results/README.md). Deterministic: fixed seeds, and
 # the statistics do not depend on the thread count.
 #   scripts/reproduce.sh            # all
-#   scripts/reproduce.sh kleeman95  # one part: kleeman95, sweeps (later issues add more)
+#   scripts/reproduce.sh kleeman95  # one part: kleeman95, sweeps, optiodom
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
@@ -44,5 +44,25 @@ if want sweeps; then
     --x path.sample_rate --x-label "sample rate [Hz]" \
     --title "First-order theory against sample rate: Fig. 7 path, kL = kR = 1e-3 x noise_scale" \
     --out "$out/sample_rate.png"
+fi
+if want optiodom; then
+  out="$results/optiodom"
+  data="$root/../shared/data/optiodom/data/diff"
+  suite="$root/build/optiodom"  # the imported suite is regenerated, not committed
+  mkdir -p "$out"
+  # One nominal robot for every session: B = 0.2 m, D = 0.084 m. Some sessions' metadata say
+  # 0.205/0.085, but their raw ticks behave exactly like the others' (results/optiodom/README.md).
+  "$odomcov" import optiodom "$data"/square/* "$data"/ivanjko/* "$data"/circular/* "$data"/free/* \
+    --wheelbase 0.2 --diameters 0.084,0.084 --out "$suite" > "$out/import.txt"
+  "$odomcov" compare "$suite/suite.yaml" --json "$out/compare_nominal.json" > "$out/compare_nominal.txt"
+  cw=$(grep -o 'square-[0-9]*-cw' "$suite/suite.yaml" | sort -u | paste -sd,)
+  ccw=$(grep -o 'square-[0-9]*-ccw' "$suite/suite.yaml" | sort -u | paste -sd,)
+  "$odomcov" umbmark "$suite/suite.yaml" --cw "$cw" --ccw "$ccw" --side 0.75 \
+    --json "$out/umbmark.json" > "$out/umbmark.txt"
+  for type in square ivanjko circular free; do
+    "$python" "$root/scripts/plot_compare.py" "$out/compare_nominal.json" --match "$type-" \
+      --title "OptiOdom $type runs against the nominal model (B = 0.2 m, kL = kR = 1e-3)" \
+      --out "$out/compare_nominal_$type.png"
+  done
 fi
 echo "results regenerated in $results" >&2

@@ -1,8 +1,15 @@
 #include "odomcov/suite.hpp"
 
+#include <tbb/parallel_for.h>
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <boost/math/distributions/chi_squared.hpp>
+#include <boost/math/distributions/normal.hpp>
+#include <boost/math/distributions/students_t.hpp>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <set>
 
@@ -166,6 +173,257 @@ Suite load_suite(const std::string& file) {
     suite.experiments.push_back(std::move(ex));
   }
   return suite;
+}
+
+}  // namespace odomcov
+
+namespace odomcov {
+namespace {
+
+constexpr int kDim = 3;
+/// The LRT's Bartlett-corrected chi^2 is accurate from about ten runs; below, the NEES test.
+constexpr std::int64_t kMinRunsForLrt = 10;
+/// chi^2_3 95% point (Abramowitz & Stegun 26.8): the NEES bound of "outside_95".
+constexpr double kChi2_3_95 = 7.814727903251178;
+
+const char* const kComponent[kDim] = {"x", "y", "theta"};
+const char* const kUnit[kDim] = {"m", "m", "rad"};
+
+std::string num(double v, const char* format = "%.4g") {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+
+double student_t_two_sided(double t, double dof) {
+  if (!(dof > 0) || !std::isfinite(t)) return std::isfinite(t) ? 1.0 : 0.0;
+  return 2.0 * boost::math::cdf(boost::math::complement(boost::math::students_t(dof), std::abs(t)));
+}
+
+double chi2_two_sided(double x, double dof) {
+  const boost::math::chi_squared d(dof);
+  const double lower = boost::math::cdf(d, std::max(x, 0.0));
+  return std::min(1.0, 2.0 * std::min(lower, 1.0 - lower));
+}
+
+/// Model error of a path experiment's runs at the model's wheelbase.
+Vector3 error_against(const Vector3& measured, const Vector3& odometry) {
+  return {measured.x() - odometry.x(), measured.y() - odometry.y(),
+          wrap_angle(measured.z() - odometry.z())};
+}
+
+ExperimentComparison compare_experiment(const SuiteExperiment& ex,
+                                        const std::vector<RunResidual>& res, double alpha_test,
+                                        std::vector<Vector3>& whitened) {
+  ExperimentComparison c;
+  c.name = ex.name;
+  c.n = static_cast<std::int64_t>(res.size());
+  const double n = static_cast<double>(c.n);
+  std::vector<Vector3> errors, raw;
+  whitened.clear();
+  Matrix3 mean_cov = Matrix3::Zero();
+  MomentAccumulator predicted_means;
+  for (const RunResidual& r : res) {
+    errors.push_back(r.error);
+    raw.push_back(r.error - r.mean);
+    const Eigen::LLT<Matrix3> llt(r.cov);
+    const Vector3 z = llt.matrixL().solve(r.error - r.mean);
+    whitened.push_back(z);
+    const double nees = z.squaredNorm();
+    c.nees_mean += nees / n;
+    c.outside_95 += (nees > kChi2_3_95 ? 1.0 : 0.0) / n;
+    c.log_likelihood += gaussian_log_density(r.error, r.mean, r.cov);
+    mean_cov += r.cov / n;
+    predicted_means.add(r.mean);
+  }
+  c.measured = moments(errors);
+  c.predicted_mean = predicted_means.mean();
+  c.predicted_cov = mean_cov + predicted_means.scatter() / n;
+
+  const SampleMoments z = moments(whitened);
+  c.mean_test = c.n > kDim ? hotelling_test(z, Vector3::Zero())
+                           : mean_test_known_covariance(z, Vector3::Zero(), Matrix3::Identity());
+  if (c.n >= kMinRunsForLrt) {
+    c.cov_test = covariance_test(z, Matrix3::Identity());
+    c.cov_method = "lrt";
+  } else {
+    c.cov_test.statistic = c.nees_mean * n;
+    c.cov_test.dof = kDim * static_cast<int>(c.n);
+    c.cov_test.p_value = chi2_two_sided(c.cov_test.statistic, c.cov_test.dof);
+    c.cov_method = "nees";
+  }
+  const SampleMoments r = moments(raw);
+  for (int k = 0; k < kDim; ++k) {
+    // Like the joint test: the sample's own standard error (Student t) when the experiment is
+    // large enough for Hotelling, else the predicted one (normal).
+    const double sd = std::sqrt(std::max(r.cov(k, k), 0.0));
+    if (c.n > kDim && sd > 0) {
+      c.mean_t(k) = r.mean(k) / (sd / std::sqrt(n));
+      c.mean_p(k) = student_t_two_sided(c.mean_t(k), n - 1);
+    } else {
+      c.mean_t(k) = r.mean(k) / std::sqrt(mean_cov(k, k) / n);
+      c.mean_p(k) = 2.0 * boost::math::cdf(boost::math::complement(boost::math::normal(),
+                                                                   std::abs(c.mean_t(k))));
+    }
+    if (c.n > 1 && mean_cov(k, k) > 0) {
+      c.variance_ratio(k) = r.cov(k, k) / mean_cov(k, k);
+      c.variance_p(k) = chi2_two_sided((n - 1) * c.variance_ratio(k), n - 1);
+    }
+  }
+  const bool reject = (c.mean_test.valid && c.mean_test.p_value < alpha_test) ||
+                      (c.cov_test.valid && c.cov_test.p_value < alpha_test);
+  c.verdict = reject ? "inconsistent" : "consistent";
+  return c;
+}
+
+std::vector<std::string> failure_words(const ExperimentComparison& c, double alpha_test) {
+  std::vector<std::string> words;
+  if (c.mean_test.valid && c.mean_test.p_value < alpha_test) {
+    int worst = 0;
+    for (int k = 1; k < kDim; ++k) worst = c.mean_p(k) < c.mean_p(worst) ? k : worst;
+    for (int k = 0; k < kDim; ++k) {
+      if (k != worst && !(c.mean_p(k) < alpha_test)) continue;
+      words.push_back(c.name + ": " + kComponent[k] + " mean " + num(c.measured.mean(k)) + " " +
+                      kUnit[k] + ", " + num(std::abs(c.mean_t(k)), "%.1f") +
+                      " standard errors from the predicted " + num(c.predicted_mean(k)));
+    }
+  }
+  if (c.cov_test.valid && c.cov_test.p_value < alpha_test) {
+    bool named = false;
+    for (int k = 0; k < kDim; ++k) {
+      if (!(c.variance_p(k) < alpha_test)) continue;
+      words.push_back(c.name + ": " + kComponent[k] + " variance " +
+                      num(c.variance_ratio(k), "%.2g") + "x predicted");
+      named = true;
+    }
+    if (!named) {
+      double worst = -1;
+      std::string text;
+      for (int a = 0; a < kDim; ++a) {
+        for (int b = a + 1; b < kDim; ++b) {
+          const double rm = c.measured.cov(a, b) / std::sqrt(c.measured.cov(a, a) * c.measured.cov(b, b));
+          const double rp = c.predicted_cov(a, b) /
+                            std::sqrt(c.predicted_cov(a, a) * c.predicted_cov(b, b));
+          if (std::abs(rm - rp) > worst) {
+            worst = std::abs(rm - rp);
+            text = c.name + ": " + kComponent[a] + "-" + kComponent[b] + " correlation " +
+                   num(rm, "%.2f") + " measured against " + num(rp, "%.2f") + " predicted";
+          }
+        }
+      }
+      if (c.cov_method == "nees") {
+        text = c.name + ": errors " + num(std::sqrt(c.nees_mean / kDim), "%.2g") +
+               "x the predicted spread (NEES " + num(c.nees_mean, "%.3g") +
+               " per run against 3)";
+      }
+      words.push_back(text);
+    }
+  }
+  return words;
+}
+
+}  // namespace
+
+SuiteModel suite_model(const Suite& suite) {
+  return {suite.robot, suite.model_effects, suite.measurement_noise};
+}
+
+std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model) {
+  const double B = model.robot.wheelbase_m;
+  const Matrix3 meas = model.measurement_noise.covariance();
+  std::vector<std::vector<RunResidual>> out(suite.experiments.size());
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+    const SuiteExperiment& ex = suite.experiments[e];
+    out[e].resize(ex.runs.size());
+    if (!ex.logged) {
+      const Prediction p = predict(model_pieces(ex.path, B), model.robot, model.effects);
+      const Vector3 odometry = B == suite.robot.wheelbase_m && !ex.runs.empty()
+                                   ? ex.runs.front().odometry
+                                   : sampled_end_pose(ex.path, B);
+      for (std::size_t r = 0; r < ex.runs.size(); ++r) {
+        out[e][r] = {error_against(ex.runs[r].measured, odometry), p.mean + p.noise_mean,
+                     p.cov + meas};
+      }
+      continue;
+    }
+    tbb::parallel_for(std::size_t{0}, ex.runs.size(), [&](std::size_t r) {
+      const Prediction p = predict(ex.runs[r].pieces, model.robot, model.effects);
+      out[e][r] = {error_against(ex.runs[r].measured, p.odometry_end_pose), p.mean + p.noise_mean,
+                   p.cov + meas};
+    });
+  }
+  return out;
+}
+
+double log_likelihood(const std::vector<std::vector<RunResidual>>& res) {
+  double sum = 0.0;
+  for (const auto& ex : res) {
+    for (const RunResidual& r : ex) sum += gaussian_log_density(r.error, r.mean, r.cov);
+  }
+  return sum;
+}
+
+Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
+  Comparison out;
+  out.alpha = alpha;
+  out.alpha_per_test = alpha / static_cast<double>(2 * suite.experiments.size() + 1);
+  const auto res = residuals(suite, model);
+  std::vector<Vector3> pooled;  // whitened residuals, centred per experiment
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+    std::vector<Vector3> z;
+    out.experiments.push_back(
+        compare_experiment(suite.experiments[e], res[e], out.alpha_per_test, z));
+    out.log_likelihood += out.experiments.back().log_likelihood;
+    Vector3 mean = Vector3::Zero();
+    for (const Vector3& v : z) mean += v / static_cast<double>(z.size());
+    for (const Vector3& v : z) pooled.push_back(v - mean);
+  }
+  // Mardia's multivariate kurtosis [Mardia70] of the pooled residuals against their own
+  // covariance (so it tests shape, not scale): b2 = mean((d' S^-1 d)^2), E b2 = p(p+2)(N-1)/(N+1)
+  // and Var b2 = 8p(p+2)/N under normality.
+  const double N = static_cast<double>(pooled.size());
+  if (pooled.size() > 2 * kDim) {
+    Matrix3 S = Matrix3::Zero();
+    for (const Vector3& d : pooled) S += d * d.transpose() / N;
+    const Eigen::LLT<Matrix3> llt(S);
+    for (const Vector3& d : pooled) {
+      const double m = d.dot(llt.solve(d));
+      out.mardia_b2 += m * m / N;
+    }
+    const double expected = kDim * (kDim + 2) * (N - 1) / (N + 1);
+    out.kurtosis.statistic = (out.mardia_b2 - expected) / std::sqrt(8.0 * kDim * (kDim + 2) / N);
+    out.kurtosis.dof = 0;
+    out.kurtosis.p_value = 2.0 * boost::math::cdf(boost::math::complement(
+                                     boost::math::normal(), std::abs(out.kurtosis.statistic)));
+  } else {
+    out.kurtosis.valid = false;
+  }
+
+  std::vector<const ExperimentComparison*> order;
+  for (const auto& c : out.experiments) order.push_back(&c);
+  auto worst_p = [](const ExperimentComparison* c) {
+    return std::min(c->mean_test.valid ? c->mean_test.p_value : 1.0,
+                    c->cov_test.valid ? c->cov_test.p_value : 1.0);
+  };
+  // Worst first: smallest p-value, ties (p underflowing to 0) broken by the NEES per run.
+  std::stable_sort(order.begin(), order.end(), [&](auto* a, auto* b) {
+    return worst_p(a) != worst_p(b) ? worst_p(a) < worst_p(b) : a->nees_mean > b->nees_mean;
+  });
+  bool inconsistent = false;
+  for (const ExperimentComparison* c : order) {
+    inconsistent = inconsistent || c->verdict == "inconsistent";
+    for (std::string& w : failure_words(*c, out.alpha_per_test)) out.failures.push_back(std::move(w));
+  }
+  if (out.kurtosis.valid && out.kurtosis.p_value < out.alpha_per_test) {
+    inconsistent = true;
+    const double expected = kDim * (kDim + 2) * (N - 1) / (N + 1);
+    out.failures.push_back(std::string(out.mardia_b2 > expected ? "tails heavier" : "tails lighter") +
+                           " than Gaussian: Mardia kurtosis " + num(out.mardia_b2, "%.1f") +
+                           " against " + num(expected, "%.1f") + ", p = " +
+                           num(out.kurtosis.p_value, "%.2g"));
+  }
+  out.verdict = inconsistent ? "inconsistent" : "consistent";
+  return out;
 }
 
 }  // namespace odomcov

@@ -7,6 +7,7 @@
 
 #include "odomcov/effects.hpp"
 #include "odomcov/path.hpp"
+#include "odomcov/statistics.hpp"
 
 namespace odomcov {
 
@@ -48,6 +49,66 @@ struct Suite {
 /// a missing file, an empty CSV, wrong columns, a value that is not a finite number, duplicate
 /// run ids, a log without a final reference pose, time that does not increase, ...
 Suite load_suite(const std::string& file);
+
+/// What a model believes about the robot: the nominal robot (wheelbase for the odometry, k's),
+/// its effects, and the noise of the external reference.
+struct SuiteModel {
+  Robot robot;
+  EffectList effects;
+  MeasurementNoise measurement_noise;
+};
+SuiteModel suite_model(const Suite& suite);
+
+/// One run set against the model: its error (measured - odometry at the model's wheelbase) and
+/// the predicted mean and covariance, measurement noise included. The predicted mean is the
+/// systematic mean plus the noise-induced mean (propagation.hpp).
+struct RunResidual {
+  Vector3 error = Vector3::Zero();
+  Vector3 mean = Vector3::Zero();
+  Matrix3 cov = Matrix3::Zero();
+};
+
+/// Residuals of every run of every experiment (runs with logs are predicted one by one, in
+/// parallel).
+std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model);
+
+/// Sum over runs of the Gaussian log-density of the error under its prediction.
+double log_likelihood(const std::vector<std::vector<RunResidual>>& residuals);
+
+/// compare for one experiment (SPEC "JSON of compare").
+struct ExperimentComparison {
+  std::string name;
+  std::int64_t n = 0;
+  SampleMoments measured;                 // of the errors
+  Vector3 predicted_mean = Vector3::Zero();  // for a run drawn from the experiment
+  Matrix3 predicted_cov = Matrix3::Zero();   // (mixture over runs for logged experiments)
+  TestResult mean_test;   // Hotelling's T^2 on whitened residuals (chi^2 when n <= 3)
+  TestResult cov_test;    // LRT of cov = I on whitened residuals (NEES test when n < 5)
+  std::string cov_method;  // "lrt" or "nees"
+  double nees_mean = 0.0;
+  double outside_95 = 0.0;  // fraction of runs with NEES above the chi^2_3 95% point
+  double log_likelihood = 0.0;
+  std::string verdict;
+  // Per component (x, y, theta), for the plain-words failures:
+  Vector3 mean_t = Vector3::Zero();        // (measured - predicted mean)/standard error
+  Vector3 mean_p = Vector3::Ones();        // Student-t p-values
+  Vector3 variance_ratio = Vector3::Ones();  // measured / predicted variance
+  Vector3 variance_p = Vector3::Ones();    // chi^2 p-values (two-sided)
+};
+
+struct Comparison {
+  double alpha = 0.0;           // family-wise level of the suite
+  double alpha_per_test = 0.0;  // Bonferroni over 2 tests per experiment + kurtosis
+  std::vector<ExperimentComparison> experiments;
+  TestResult kurtosis;          // Mardia's b2 on the pooled whitened residuals
+  double mardia_b2 = 0.0;
+  double log_likelihood = 0.0;
+  std::string verdict;
+  std::vector<std::string> failures;  // plain words, worst experiment first
+};
+
+/// The model against every experiment of the suite ("where it fails" included).
+Comparison compare(const Suite& suite, const SuiteModel& model, double alpha);
 
 /// The odometry end pose of a sampled path: the encoder samples integrated with the exact arc
 /// update at the nominal wheelbase, as the simulator integrates them.

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "odomcov/suite.hpp"
 #include "odomcov/validation.hpp"
 
 namespace odomcov::cli {
@@ -18,6 +19,14 @@ void setup_theory(CLI::App& app, int& exit_code);
 void setup_run(CLI::App& app, int& exit_code);
 void setup_sweep(CLI::App& app, int& exit_code);
 void setup_synth(CLI::App& app, int& exit_code);
+void setup_compare(CLI::App& app, int& exit_code);
+void setup_fit(CLI::App& app, int& exit_code);
+void setup_umbmark(CLI::App& app, int& exit_code);
+void setup_import(CLI::App& app, int& exit_code);
+
+/// The report and JSON of `compare` (SPEC "JSON of compare"), shared with `diagnose`.
+std::string comparison_text(const Suite& suite, const Comparison& c);
+nlohmann::json comparison_json(const Suite& suite, const Comparison& c);
 
 /// The JSON of `run` (SPEC "JSON of run"), shared with `sweep`.
 nlohmann::json validation_json(const std::string& name, const Validation& v);

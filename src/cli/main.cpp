@@ -17,6 +17,10 @@ int main(int argc, char** argv) {
   setup_run(app, exit_code);
   setup_sweep(app, exit_code);
   setup_synth(app, exit_code);
+  setup_compare(app, exit_code);
+  setup_fit(app, exit_code);
+  setup_umbmark(app, exit_code);
+  setup_import(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -1,0 +1,72 @@
+// Calibration from measured runs: the maximum-likelihood fit of model parameters ([Chong97]
+// §5.2 done properly) and Borenstein & Feng's UMBmark ([Borenstein96]; [Chong97] eqs. 5-12).
+#pragma once
+
+#include <Eigen/Core>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "odomcov/suite.hpp"
+
+namespace odomcov {
+
+/// Names a fit can take: "k_left", "k_right", "wheelbase" (the nominal one, which the odometry
+/// uses) and "<effect>.<parameter>" for any catalogue effect. An effect not yet in the model is
+/// added, starting from its typical size. Returns "" or what is wrong.
+std::string check_fit_parameter(const std::string& name);
+
+struct FitResult {
+  std::vector<std::string> names;
+  Eigen::VectorXd values;
+  Eigen::VectorXd stderrs;  // NaN where not identifiable or at a bound
+  Eigen::MatrixXd covariance;  // of the estimates, from the observed information
+  double log_likelihood_before = 0.0;  // the starting model (added effects at neutral)
+  double log_likelihood_after = 0.0;
+  int evaluations = 0;
+  std::vector<std::string> warnings;
+  SuiteModel model;  // the fitted model
+};
+
+/// Maximises the suite's Gaussian log-likelihood over the named parameters with NLopt's
+/// BOBYQA (bounded, derivative-free), each parameter in a transformed coordinate in which it is
+/// unbounded or simply bounded (log for positive scales, atanh for a correlation, square root
+/// for variance-like sizes that may be 0). Standard errors come from the observed information:
+/// the inverse of the numerical Hessian of -log L at the optimum, by central differences with
+/// steps set to a fifth of a first estimate of each standard error.
+FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names);
+
+struct UmbmarkResult {
+  double side_m = 0.0;
+  Eigen::Vector2d cg_cw = Eigen::Vector2d::Zero();   // centres of gravity of the x-y errors
+  Eigen::Vector2d cg_ccw = Eigen::Vector2d::Zero();
+  Eigen::Vector2d cg_cw_after = Eigen::Vector2d::Zero();
+  Eigen::Vector2d cg_ccw_after = Eigen::Vector2d::Zero();
+  double alpha = 0.0;  // rad, turning error per 90 deg turn: > 0 when the robot under-turns
+  double beta = 0.0;   // rad, heading change over one straight side: > 0 when it curves left
+  double Ed = 1.0, Eb = 1.0;
+  double c_left = 1.0, c_right = 1.0;
+  double wheelbase_corrected = 0.0;
+  double emax_before = 0.0, emax_after = 0.0;
+  std::int64_t runs_cw = 0, runs_ccw = 0;
+};
+
+/// UMBmark from the CW and CCW square runs (each a comma-separated list of experiment names):
+///   alpha = mean((x_cw + x_ccw)/(-4L), (y_cw - y_ccw)/(-4L))
+///   beta  = mean((x_cw - x_ccw)/(-4L), (y_cw + y_ccw)/(-4L))
+///   R = (L/2)/sin(beta/2),  Ed = (R + b/2)/(R - b/2),  Eb = (pi/2)/(pi/2 - alpha),
+///   c_L = 2/(Ed + 1), c_R = 2/(1/Ed + 1), b_new = Eb b,  Emax = max(|cg_cw|, |cg_ccw|).
+/// Errors are true - odometry in the start frame (x along the initial heading, y to its left),
+/// the convention of [Borenstein96]. "After" re-integrates each run's encoder travel with the
+/// corrections. The side L is the planned paths' line length unless given; logged runs must
+/// give it (their turns need not be on the spot, so the travel does not tell it).
+UmbmarkResult umbmark(const Suite& suite, const std::string& cw, const std::string& ccw,
+                      std::optional<double> side_m);
+
+/// Emax,sys of the same square runs with the odometry re-integrated at corrections
+/// (c_L, c_R, b), e.g. those of a maximum-likelihood fit of Ed and Eb.
+double umbmark_emax(const Suite& suite, const std::string& cw, const std::string& ccw,
+                    double c_left, double c_right, double wheelbase_m);
+
+}  // namespace odomcov

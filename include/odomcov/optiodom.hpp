@@ -1,0 +1,45 @@
+// Import of the OptiOdom recordings [Sousa22] (../shared/data/optiodom, MIT licence) as a
+// measurement suite with per-run encoder logs.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "odomcov/suite.hpp"
+
+namespace odomcov {
+
+struct OptiOdomOptions {
+  std::vector<std::string> sessions;  // session directories, e.g. .../diff/square/230620202042
+  std::optional<double> wheelbase_m;  // nominal robot; default: the sessions' metadata Li
+  std::optional<std::pair<double, double>> diameters_m;  // (left, right); default: metadata Di
+  double k = 1e-3;  // nominal wheel noise for the suite's robot (to be fitted)
+  MeasurementNoise measurement_noise{0.001, 0.1 * M_PI / 180.0};  // OptiTrack, conservative
+  std::string name = "optiodom";
+};
+
+/// One file of the imported suite: its path relative to the output directory and its text.
+struct ImportedFile {
+  std::string path;
+  std::string text;
+};
+
+struct ImportSummary {
+  std::string experiment;
+  std::size_t runs = 0;
+  double mean_travel_m = 0.0;
+  double mean_turn_rad = 0.0;
+};
+
+/// Reads every session (metadata and run files, validated) and returns the suite's files:
+/// suite.yaml and one log per run (t, cumulative left and right metres, and the OptiTrack end
+/// pose in the last row). Encoder ticks become metres as pi D / (ngear encRes): the data show
+/// no quadrature factor (README). Runs are grouped into experiments by path type (the session's
+/// parent folder), session and, for the calibration paths, turning direction (cw, ccw or
+/// straight from the sign of the encoders' total heading change).
+std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
+                                          std::vector<ImportSummary>* summary = nullptr);
+
+}  // namespace odomcov

@@ -1,0 +1,92 @@
+// odomcov fit SUITE.yaml --params P1,P2,... [--json FILE]
+// Maximum-likelihood fit of model parameters with standard errors ([Chong97] §5.2 done properly).
+#include <cmath>
+#include <iostream>
+#include <sstream>
+
+#include "commands.hpp"
+#include "odomcov/calibration.hpp"
+#include "odomcov/error.hpp"
+#include "output.hpp"
+
+namespace odomcov::cli {
+namespace {
+
+struct FitOptions {
+  std::string suite;
+  std::vector<std::string> params;
+  std::string json;
+};
+
+int run_fit(const FitOptions& opt) {
+  if (!opt.json.empty()) check_output_path(opt.json);
+  if (opt.params.empty()) throw UsageError("--params needs at least one parameter");
+  for (std::size_t i = 0; i < opt.params.size(); ++i) {
+    if (const std::string e = check_fit_parameter(opt.params[i]); !e.empty()) {
+      throw UsageError("--params: " + e);
+    }
+    for (std::size_t j = 0; j < i; ++j) {
+      if (opt.params[j] == opt.params[i]) throw UsageError("--params: " + opt.params[i] + " given twice");
+    }
+  }
+  const Suite suite = load_suite(opt.suite);
+  const FitResult r = fit(suite, suite_model(suite), opt.params);
+
+  std::ostringstream out;
+  out << "odomcov fit: " << suite.name << " (" << suite.experiments.size()
+      << " experiments), maximum likelihood\n";
+  json parameters = json::object(), stderrs = json::object();
+  for (std::size_t i = 0; i < r.names.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    const double se = r.stderrs(k);
+    char line[160];
+    std::snprintf(line, sizeof line, "  %-32s %.6g", r.names[i].c_str(), r.values(k));
+    out << line << (std::isfinite(se) ? " +/- " + sci(se, 2) : std::string(" (no standard error)"))
+        << "\n";
+    parameters[r.names[i]] = r.values(k);
+    stderrs[r.names[i]] = std::isfinite(se) ? json(se) : json(nullptr);
+  }
+  out << "log-likelihood: " << fixed(r.log_likelihood_before, 3) << " before, "
+      << fixed(r.log_likelihood_after, 3) << " after (" << r.evaluations << " evaluations)\n";
+  for (const std::string& w : r.warnings) out << "warning: " << w << "\n";
+  if (!r.model.effects.empty()) {
+    out << "model.effects to paste into the suite:\n  effects:\n";
+    for (const EffectSpec& e : r.model.effects) out << "    " << effect_yaml(e) << "\n";
+  }
+  std::cout << out.str();
+  if (!opt.json.empty()) {
+    json corr = json::array();
+    for (Eigen::Index i = 0; i < r.covariance.rows(); ++i) {
+      json row = json::array();
+      for (Eigen::Index j = 0; j < r.covariance.cols(); ++j) {
+        const double c = r.covariance(i, j) / std::sqrt(r.covariance(i, i) * r.covariance(j, j));
+        row.push_back(std::isfinite(c) ? json(c) : json(nullptr));
+      }
+      corr.push_back(row);
+    }
+    write_json_atomic(opt.json, {{"parameters", parameters},
+                                 {"stderr", stderrs},
+                                 {"correlation", corr},
+                                 {"log_likelihood_before", r.log_likelihood_before},
+                                 {"log_likelihood_after", r.log_likelihood_after},
+                                 {"evaluations", r.evaluations},
+                                 {"warnings", r.warnings}});
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void setup_fit(CLI::App& app, int& exit_code) {
+  auto opt = std::make_shared<FitOptions>();
+  CLI::App* cmd = app.add_subcommand("fit", "Maximum-likelihood fit of model parameters");
+  cmd->add_option("suite", opt->suite, "Measurement suite (YAML)")->required();
+  cmd->add_option("--params", opt->params,
+                  "Parameters: k_left, k_right, wheelbase, <effect>.<parameter>")
+      ->required()
+      ->delimiter(',');
+  cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
+  cmd->callback([opt, &exit_code] { exit_code = run_fit(*opt); });
+}
+
+}  // namespace odomcov::cli

@@ -1,0 +1,182 @@
+#include "odomcov/optiodom.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+
+#include "csv.hpp"
+#include "odomcov/error.hpp"
+
+namespace odomcov {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// A run whose total encoder heading change is below this is a straight run.
+constexpr double kStraightBelowRad = 0.5;
+
+struct Metadata {
+  std::string file;
+  double gear = 0, resolution = 0, wheelbase = 0;
+  std::vector<double> diameters;  // D1 (first encoder column, odoR), D2 (odoL)
+};
+
+Metadata read_metadata(const fs::path& dir) {
+  const std::string session = dir.filename().string();
+  const fs::path file = dir / (session + "_metadata.csv");
+  const csv::Table table = csv::read_headerless(file.string(), 1);
+  Metadata m;
+  m.file = file.string();
+  std::map<std::string, const csv::Row*> rows;
+  for (const csv::Row& row : table.rows) rows[row.text(0)] = &row;
+  auto need = [&](const char* key) -> const csv::Row& {
+    const auto it = rows.find(key);
+    if (it == rows.end()) throw InputError(m.file, 0, key, "missing metadata row");
+    return *it->second;
+  };
+  if (need("type").cells.size() < 2 || need("type").text(1) != "diff") {
+    throw InputError(m.file, need("type").line, "type", "only differential-drive (diff) data");
+  }
+  auto positive = [&](const char* key) {
+    const csv::Row& row = need(key);
+    if (row.cells.size() < 2) csv::fail(m.file, row.line, key, "missing value");
+    const double v = row.number(1);
+    if (!(v > 0)) csv::fail(m.file, row.line, key, "must be > 0");
+    return v;
+  };
+  m.gear = positive("ngear");
+  m.resolution = positive("encRes");
+  m.wheelbase = positive("Li");
+  const csv::Row& di = need("Di");
+  for (std::size_t i = 1; i < di.cells.size() && !di.empty(i); ++i) m.diameters.push_back(di.number(i));
+  if (m.diameters.size() != 2) csv::fail(m.file, di.line, "Di", "expected two wheel diameters");
+  return m;
+}
+
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+}  // namespace
+
+std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
+                                          std::vector<ImportSummary>* summary) {
+  if (options.sessions.empty()) throw InputError("", 0, "", "no session directories given");
+  // Metadata first: all sessions must agree on the nominal robot unless one is given.
+  std::vector<Metadata> metas;
+  for (const std::string& s : options.sessions) {
+    const fs::path dir(s);
+    if (!fs::is_directory(dir)) throw InputError(s, 0, "", "not a session directory");
+    metas.push_back(read_metadata(dir));
+  }
+  double wheelbase = metas[0].wheelbase;
+  std::pair<double, double> diameters{metas[0].diameters[1], metas[0].diameters[0]};  // (L, R)
+  for (const Metadata& m : metas) {
+    if (!options.wheelbase_m && m.wheelbase != wheelbase) {
+      throw InputError(m.file, 0, "Li",
+                       "sessions disagree on the wheelbase (" + num(wheelbase) + " and " +
+                           num(m.wheelbase) + "); choose the nominal robot with --wheelbase");
+    }
+    if (!options.diameters_m &&
+        (m.diameters[1] != diameters.first || m.diameters[0] != diameters.second)) {
+      throw InputError(m.file, 0, "Di",
+                       "sessions disagree on the wheel diameters; choose them with --diameters");
+    }
+    if (m.gear != metas[0].gear || m.resolution != metas[0].resolution) {
+      throw InputError(m.file, 0, "ngear", "sessions disagree on the gear ratio or encoder resolution");
+    }
+  }
+  if (options.wheelbase_m) wheelbase = *options.wheelbase_m;
+  if (options.diameters_m) diameters = *options.diameters_m;
+  const double ticks = metas[0].gear * metas[0].resolution;  // encoder counts per wheel turn
+  const double metres_left = M_PI * diameters.first / ticks;
+  const double metres_right = M_PI * diameters.second / ticks;
+
+  std::vector<ImportedFile> files;
+  std::map<std::string, std::vector<std::string>> experiments;  // name -> log paths
+  std::map<std::string, ImportSummary> sums;
+  for (const std::string& s : options.sessions) {
+    const fs::path dir = fs::path(s).lexically_normal();
+    const std::string session = dir.filename().string();
+    const std::string type = dir.parent_path().filename().string();
+    std::vector<fs::path> run_files;
+    for (const auto& entry : fs::directory_iterator(dir)) {
+      const std::string name = entry.path().filename().string();
+      if (name.rfind(session + "_run-", 0) == 0 && entry.path().extension() == ".csv") {
+        run_files.push_back(entry.path());
+      }
+    }
+    std::sort(run_files.begin(), run_files.end());
+    if (run_files.empty()) throw InputError(s, 0, "", "no run files (" + session + "_run-NN.csv)");
+    for (const fs::path& run_file : run_files) {
+      // Columns: time, x_gt, y_gt, th_gt, odoR, odoL (ticks in the cycle ending at the row).
+      const csv::Table table = csv::read_headerless(run_file.string(), 6);
+      std::string log = "t,left,right,x,y,theta\n";
+      double left = 0, right = 0, t_prev = -HUGE_VAL, turned = 0, travel = 0;
+      for (std::size_t i = 0; i < table.rows.size(); ++i) {
+        const csv::Row& row = table.rows[i];
+        const double t = row.number(0);
+        const Vector3 reference(row.number(1), row.number(2), row.number(3));  // every row checked
+        if (!(t > t_prev)) csv::fail(run_file.string(), row.line, "time", "time must increase strictly");
+        t_prev = t;
+        const double dl = row.number(5) * metres_left, dr = row.number(4) * metres_right;
+        left += dl;
+        right += dr;
+        turned += (dr - dl) / wheelbase;
+        travel += std::abs(0.5 * (dl + dr));
+        log += num(t) + "," + num(left) + "," + num(right);
+        if (i + 1 == table.rows.size()) {
+          log += "," + num(reference.x()) + "," + num(reference.y()) + "," + num(reference.z());
+        } else {
+          log += ",,,";
+        }
+        log += "\n";
+      }
+      if (table.rows.size() < 2) throw InputError(run_file.string(), 0, "", "a run needs two rows or more");
+      std::string direction;
+      if (type == "square" || type == "circular" || type == "ivanjko") {
+        direction = std::abs(turned) < kStraightBelowRad ? "-straight" : turned < 0 ? "-cw" : "-ccw";
+      }
+      const std::string experiment = type + "-" + session + direction;
+      const std::string stem = run_file.stem().string();
+      const std::string rel = type + "/" + session + "/" + stem.substr(session.size() + 1) + ".csv";
+      files.push_back({rel, log});
+      experiments[experiment].push_back(rel);
+      ImportSummary& sum = sums[experiment];
+      sum.experiment = experiment;
+      sum.runs += 1;
+      sum.mean_travel_m += travel;
+      sum.mean_turn_rad += turned;
+    }
+  }
+  std::string yaml = "# Imported by `odomcov import optiodom` from the OptiOdom recordings\n"
+                     "# (Sousa et al., J Intell Robot Syst 105:39, 2022; MIT licence).\n"
+                     "# Ticks to metres: pi D / (" + num(metas[0].gear) + " x " +
+                     num(metas[0].resolution) + "), no quadrature factor.\n";
+  yaml += "name: " + options.name + "\n";
+  yaml += "robot: {wheelbase: " + num(wheelbase) + ", k_left: " + num(options.k) +
+          ", k_right: " + num(options.k) + "}\n";
+  yaml += "measurement_noise: {xy: " + num(options.measurement_noise.xy_m) +
+          ", theta_deg: " + num(options.measurement_noise.theta_rad * 180.0 / M_PI) + "}\n";
+  yaml += "experiments:\n";
+  for (const auto& [name, logs] : experiments) {
+    yaml += "  - name: " + name + "\n    logs:\n";
+    for (const std::string& l : logs) yaml += "      - " + l + "\n";
+  }
+  files.push_back({"suite.yaml", yaml});
+  if (summary) {
+    for (auto& [name, sum] : sums) {
+      sum.mean_travel_m /= static_cast<double>(sum.runs);
+      sum.mean_turn_rad /= static_cast<double>(sum.runs);
+      summary->push_back(sum);
+    }
+  }
+  return files;
+}
+
+}  // namespace odomcov

@@ -1,0 +1,107 @@
+// compare, fit and UMBmark on synthesised suites whose truth is known.
+#include "odomcov/calibration.hpp"
+
+#include <gtest/gtest.h>
+
+#include <boost/math/distributions/normal.hpp>
+#include <filesystem>
+#include <fstream>
+
+#include "odomcov/error.hpp"
+#include "odomcov/world.hpp"
+
+namespace odomcov {
+namespace {
+
+constexpr double kAlpha = 1e-3;
+const std::string kWorlds = ODOMCOV_SOURCE_DIR "/tests/data/worlds/";
+
+/// Synthesises a world into a temporary directory and loads the suite back.
+Suite synth_suite(const WorldFile& w, const std::string& tag) {
+  const auto dir = std::filesystem::temp_directory_path() / ("odomcov_cal_" + tag);
+  std::filesystem::create_directories(dir);
+  for (std::size_t i = 0; i < w.experiments.size(); ++i) {
+    std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
+  }
+  std::ofstream(dir / "suite.yaml") << suite_yaml(w);
+  return load_suite((dir / "suite.yaml").string());
+}
+
+TEST(Compare, PlainWorldIsConsistentAndHiddenEffectsAreNamed) {
+  const Suite plain = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/plain.yaml"), "plain");
+  const Comparison ok = compare(plain, suite_model(plain), kAlpha);
+  EXPECT_EQ(ok.verdict, "consistent");
+  EXPECT_TRUE(ok.failures.empty());
+  for (const ExperimentComparison& e : ok.experiments) EXPECT_NEAR(e.nees_mean, 3.0, 1.5) << e.name;
+
+  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "std");
+  const Comparison bad = compare(lab, suite_model(lab), kAlpha);
+  EXPECT_EQ(bad.verdict, "inconsistent");
+  ASSERT_FALSE(bad.failures.empty());
+  // The wheelbase error shows first on the long spin, as a heading mean.
+  EXPECT_EQ(bad.failures.front().rfind("spin-cw-720: theta mean", 0), 0u) << bad.failures.front();
+  // With the hidden effects in the model, the same data are consistent.
+  SuiteModel informed = suite_model(lab);
+  informed.effects = {{"wheel_diameter_ratio", {1.003}}, {"wheelbase_error", {1.01}}};
+  EXPECT_EQ(compare(lab, informed, kAlpha).verdict, "consistent");
+}
+
+TEST(Fit, RecoversWheelNoiseWithinItsStandardErrors) {
+  // |estimate - truth| < 3 SE: two-sided alpha = 0.0027 per parameter, from the normal limit.
+  const WorldFile w = load_world(kWorlds + "noise.yaml");
+  const Suite suite = synth_suite(w, "noise");
+  const FitResult r = fit(suite, suite_model(suite), {"k_left", "k_right"});
+  ASSERT_TRUE(r.warnings.empty());
+  EXPECT_LT(std::abs(r.values(0) - 1.6e-3), 3 * r.stderrs(0)) << r.values(0) << " +/- " << r.stderrs(0);
+  EXPECT_LT(std::abs(r.values(1) - 0.7e-3), 3 * r.stderrs(1)) << r.values(1) << " +/- " << r.stderrs(1);
+  EXPECT_GT(r.log_likelihood_after, r.log_likelihood_before);
+}
+
+TEST(Fit, StandardErrorsHaveTheirNominalCoverage) {
+  // 40 worlds x 2 parameters: the fraction of estimates within 1.96 SE of the truth must be 95%
+  // within the binomial band at alpha = 0.001; too-small SEs would show as too many misses.
+  WorldFile w = load_world(kWorlds + "noise.yaml");
+  int misses = 0, total = 0;
+  for (std::uint64_t seed = 100; seed < 140; ++seed) {
+    w.seed = seed;
+    const Suite suite = synth_suite(w, "coverage");
+    const FitResult r = fit(suite, suite_model(suite), {"k_left", "k_right"});
+    misses += std::abs(r.values(0) - 1.6e-3) > 1.96 * r.stderrs(0);
+    misses += std::abs(r.values(1) - 0.7e-3) > 1.96 * r.stderrs(1);
+    total += 2;
+  }
+  const double z = boost::math::quantile(boost::math::normal(), 1 - kAlpha / 2);
+  const double expected = 0.05 * total;
+  EXPECT_LE(misses, expected + z * std::sqrt(total * 0.05 * 0.95)) << misses << " of " << total;
+}
+
+TEST(Fit, AddsAnAbsentEffectAndFitsIt) {
+  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "std2");
+  const FitResult r = fit(lab, suite_model(lab), {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"});
+  EXPECT_LT(std::abs(r.values(0) - 1.003), 3 * r.stderrs(0));
+  EXPECT_LT(std::abs(r.values(1) - 1.01), 3 * r.stderrs(1));
+  EXPECT_EQ(r.model.effects.size(), 2u);
+  EXPECT_EQ(check_fit_parameter("bumps.size"), "effect bumps has no parameter 'size'");
+  EXPECT_EQ(check_fit_parameter("k_left"), "");
+}
+
+TEST(Umbmark, RecoversEdAndEbWithBorensteinsSigns) {
+  // Low noise, no measurement noise: what is left is UMBmark's own approximation. Its formulas
+  // are first order in alpha and beta, so the relative error in (E - 1) is O(max(|alpha|,
+  // |beta|)); we allow three times that (beta is 0.04 rad per 4 m side here).
+  const Suite suite = synth_suite(load_world(kWorlds + "squares.yaml"), "squares");
+  const UmbmarkResult r = umbmark(suite, "cw", "ccw", std::nullopt);
+  const double order = 3 * std::max(std::abs(r.alpha), std::abs(r.beta));
+  EXPECT_NEAR(r.side_m, 4.0, 1e-9);
+  EXPECT_NEAR(r.Ed - 1.0, 0.004, order * 0.004);
+  EXPECT_NEAR(r.Eb - 1.0, -0.01, order * 0.01);
+  EXPECT_LT(r.alpha, 0.0);  // a short wheelbase over-turns
+  EXPECT_GT(r.beta, 0.0);   // a larger right wheel curves left
+  EXPECT_NEAR(r.c_left, 2 / (r.Ed + 1), 1e-15);
+  EXPECT_NEAR(r.wheelbase_corrected, 0.4 * r.Eb, 1e-15);
+  EXPECT_LT(r.emax_after, 0.05 * r.emax_before);
+  EXPECT_THROW(umbmark(suite, "ccw", "cw", std::nullopt), InputError);
+}
+
+}  // namespace
+}  // namespace odomcov

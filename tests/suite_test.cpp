@@ -1,0 +1,80 @@
+// Loading suites with per-run logs, and the optiodom importer on small fixtures.
+#include "odomcov/suite.hpp"
+
+#include <gtest/gtest.h>
+
+#include "odomcov/error.hpp"
+#include "odomcov/optiodom.hpp"
+
+namespace odomcov {
+namespace {
+
+const std::string kSuites = ODOMCOV_SOURCE_DIR "/tests/data/suites/";
+
+TEST(Suite, LogsIntegrateTheirOwnOdometryUpToTheLastReference) {
+  const Suite s = load_suite(kSuites + "good_logs.yaml");
+  ASSERT_EQ(s.experiments.size(), 1u);
+  const SuiteExperiment& ex = s.experiments[0];
+  ASSERT_TRUE(ex.logged);
+  ASSERT_EQ(ex.runs.size(), 2u);
+  // log_a's last reference is on its third row: two pieces, rows after it ignored.
+  ASSERT_EQ(ex.runs[0].pieces.size(), 2u);
+  Vector3 odo = drive(drive(Vector3::Zero(), {0.05, 0.05}, 0.4), {0.05, 0.07}, 0.4);
+  EXPECT_LT((ex.runs[0].odometry - odo).norm(), 1e-15);
+  EXPECT_EQ(ex.runs[0].measured, Vector3(0.109, 0.005, 0.05));
+  EXPECT_EQ(ex.runs[0].id, "log_a");
+  EXPECT_LT((ex.runs[0].error() - (Vector3(0.109, 0.005, 0.05) - odo)).norm(), 1e-15);
+  // Residuals come from each run's own prediction.
+  const auto res = residuals(s, suite_model(s));
+  EXPECT_NE(res[0][0].cov, res[0][1].cov);
+}
+
+TEST(Suite, BadFilesNameFileLineAndColumn) {
+  auto expect = [&](const std::string& suite, const std::string& fragment) {
+    try {
+      load_suite(kSuites + suite);
+      ADD_FAILURE() << suite << ": no error";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    }
+  };
+  expect("missing_file.yaml", "missing.csv: cannot open file");
+  expect("empty_csv.yaml", "empty.csv: empty file");
+  expect("header_only.yaml", "header_only.csv:1: no data rows");
+  expect("wrong_columns.yaml", "wrong_columns.csv:1: expected the header 'run,x,y,theta'");
+  expect("nan.yaml", "nan.csv:3: column 'y': must be finite");
+  expect("duplicate_ids.yaml", "duplicate.csv:4: column 'run': duplicate run id '1'");
+  expect("log_no_reference.yaml", "log_no_reference.csv:4: column 'x,y,theta': the log has no reference pose");
+}
+
+TEST(OptiOdom, ImportsTicksAsMetresAndGroupsByDirection) {
+  OptiOdomOptions o;
+  o.sessions = {ODOMCOV_SOURCE_DIR "/tests/data/optiodom/square/20000101"};
+  std::vector<ImportSummary> summary;
+  const std::vector<ImportedFile> files = import_optiodom(o, &summary);
+  ASSERT_EQ(files.size(), 3u);
+  ASSERT_EQ(summary.size(), 2u);
+  EXPECT_EQ(summary[0].experiment, "square-20000101-cw");
+  EXPECT_EQ(summary[1].experiment, "square-20000101-straight");
+  // 40 cycles x 100 ticks x pi 0.08/(10 x 100) m per tick.
+  EXPECT_NEAR(summary[1].mean_travel_m, 40 * 100 * M_PI * 0.08 / 1000, 1e-12);
+  EXPECT_NEAR(summary[0].mean_turn_rad, -20 * 100 * M_PI * 0.08 / 1000 / 0.2, 1e-12);
+  EXPECT_NE(files.back().text.find("robot: {wheelbase: 0.2"), std::string::npos);
+}
+
+TEST(OptiOdom, MalformedSessionsFailClearly) {
+  OptiOdomOptions o;
+  o.sessions = {ODOMCOV_SOURCE_DIR "/tests/data/optiodom/bad/20000102"};
+  EXPECT_THROW(import_optiodom(o), InputError);  // no ngear row
+  o.sessions = {ODOMCOV_SOURCE_DIR "/tests/data/optiodom/bad/20000103"};
+  try {
+    import_optiodom(o);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 5);
+    EXPECT_EQ(e.key(), "column '4'");
+  }
+}
+
+}  // namespace
+}  // namespace odomcov
