@@ -46,23 +46,51 @@ if want sweeps; then
     --out "$out/sample_rate.png"
 fi
 if want optiodom; then
-  out="$results/optiodom"
-  data="$root/../shared/data/optiodom/data/diff"
-  suite="$root/build/optiodom"  # the imported suite is regenerated, not committed
+  cd "$root"  # paths in the reports are relative to the checkout
+  out=results/optiodom
+  data=../shared/data/optiodom/data/diff
+  suite=build/optiodom  # imported suites are regenerated, not committed
   mkdir -p "$out"
   # One nominal robot for every session: B = 0.2 m, D = 0.084 m. Some sessions' metadata say
   # 0.205/0.085, but their raw ticks behave exactly like the others' (results/optiodom/README.md).
-  "$odomcov" import optiodom "$data"/square/* "$data"/ivanjko/* "$data"/circular/* "$data"/free/* \
-    --wheelbase 0.2 --diameters 0.084,0.084 --out "$suite" > "$out/import.txt"
+  import_sessions() {  # DIR SESSION...
+    local dir=$1
+    shift
+    "$odomcov" import optiodom "$@" --wheelbase 0.2 --diameters 0.084,0.084 --out "$dir"
+  }
+  import_sessions "$suite" "$data"/square/* "$data"/ivanjko/* "$data"/circular/* "$data"/free/* > "$out/import.txt"
   "$odomcov" compare "$suite/suite.yaml" --json "$out/compare_nominal.json" > "$out/compare_nominal.txt"
   cw=$(grep -o 'square-[0-9]*-cw' "$suite/suite.yaml" | sort -u | paste -sd,)
   ccw=$(grep -o 'square-[0-9]*-ccw' "$suite/suite.yaml" | sort -u | paste -sd,)
   "$odomcov" umbmark "$suite/suite.yaml" --cw "$cw" --ccw "$ccw" --side 0.75 \
     --json "$out/umbmark.json" > "$out/umbmark.txt"
   for type in square ivanjko circular free; do
-    "$python" "$root/scripts/plot_compare.py" "$out/compare_nominal.json" --match "$type-" \
+    "$python" scripts/plot_compare.py "$out/compare_nominal.json" --match "$type-" \
       --title "OptiOdom $type runs against the nominal model (B = 0.2 m, kL = kR = 1e-3)" \
       --out "$out/compare_nominal_$type.png"
   done
+  # The loop of issue 7: diagnose, adopt the effect it names, repeat; then compare and fit.
+  loop() {  # NAME SUITE [--holdout SUITE]
+    local name=$1 from=$2
+    shift 2
+    rm -rf "$suite-loop-$name"
+    "$python" scripts/diagnose_loop.py --odomcov "$odomcov" "$from" --out "$suite-loop-$name" "$@" \
+      > "$out/loop_$name.md"
+    cp "$suite-loop-$name/loop.json" "$out/loop_$name.json"
+  }
+  loop all "$suite/suite.yaml"
+  # The robot and model the loop built, to paste into a suite.
+  sed -n '/^robot:/p; /^model:/,/^experiments:/{/^experiments:/!p}' "$suite-loop-all/suite.yaml" \
+    > "$out/model_all.yaml"
+  # Hold-out: the loop on the squares and Ivanjko paths only; its model then meets the circles
+  # and free paths it never saw.
+  import_sessions "$suite-train" "$data"/square/* "$data"/ivanjko/* > /dev/null
+  import_sessions "$suite-test" "$data"/circular/* "$data"/free/* > /dev/null
+  loop holdout "$suite-train/suite.yaml" --holdout "$suite-test/suite.yaml"
+  # The two campaigns apart: December 2020 and June 2020 (every path type in both).
+  import_sessions "$suite-dec" "$data"/*/2312* > /dev/null
+  import_sessions "$suite-jun" "$data"/*/2306* "$data"/*/2506* > /dev/null
+  loop dec "$suite-dec/suite.yaml"
+  loop jun "$suite-jun/suite.yaml"
 fi
 echo "results regenerated in $results" >&2

@@ -113,10 +113,28 @@ Handle make_handle(const std::string& name, const SuiteModel& model) {
   return h;
 }
 
-double negative_log_likelihood(const Suite& suite, SuiteModel& model,
-                               const std::vector<Handle>& handles, const double* u) {
+/// Puts the fitted coordinates u into the model.
+void apply(SuiteModel& model, const std::vector<Handle>& handles, const double* u) {
   for (std::size_t i = 0; i < handles.size(); ++i) handles[i].ref(model) = handles[i].from_u(u[i]);
-  const double ll = log_likelihood(residuals(suite, model));
+}
+
+double likelihood_of(const Suite& suite, const SuiteModel& model, Likelihood kind) {
+  const auto res = residuals(suite, model);
+  return kind == Likelihood::full ? log_likelihood(res) : scatter_log_likelihood(res);
+}
+
+std::vector<double> run_terms(const Suite& suite, SuiteModel& model,
+                              const std::vector<Handle>& handles, const std::vector<double>& u,
+                              Likelihood kind) {
+  apply(model, handles, u.data());
+  return run_log_likelihoods(residuals(suite, model), kind == Likelihood::scatter);
+}
+
+double negative_log_likelihood(const Suite& suite, SuiteModel& model,
+                               const std::vector<Handle>& handles, const double* u,
+                               Likelihood kind) {
+  apply(model, handles, u);
+  const double ll = likelihood_of(suite, model, kind);
   return std::isfinite(ll) ? -ll : 1e300;
 }
 
@@ -137,10 +155,11 @@ std::string check_fit_parameter(const std::string& name) {
   return "effect " + info->name + " has no parameter '" + name.substr(dot + 1) + "'";
 }
 
-FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names) {
+FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names,
+              Likelihood likelihood) {
   FitResult out;
   out.names = names;
-  out.log_likelihood_before = log_likelihood(residuals(suite, start));
+  out.log_likelihood_before = likelihood_of(suite, start, likelihood);
 
   // Effects named but absent join the model at their typical size.
   SuiteModel model = start;
@@ -171,8 +190,9 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
     const Suite* suite;
     SuiteModel* model;
     const std::vector<Handle>* handles;
+    Likelihood kind;
     int evaluations;
-  } context{&suite, &model, &handles, 0};
+  } context{&suite, &model, &handles, likelihood, 0};
   // BOBYQA needs two or more coordinates; one is fitted with the subplex method.
   nlopt::opt opt(n >= 2 ? nlopt::LN_BOBYQA : nlopt::LN_SBPLX, static_cast<unsigned>(n));
   opt.set_lower_bounds(lower);
@@ -185,7 +205,7 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
       [](const std::vector<double>& x, std::vector<double>&, void* data) {
         auto* c = static_cast<Context*>(data);
         ++c->evaluations;
-        return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data());
+        return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data(), c->kind);
       },
       &context);
   double best = 0.0;
@@ -194,13 +214,15 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
   } catch (const nlopt::roundoff_limited&) {
     // converged as far as rounding allows; u holds the best point
   }
-  best = negative_log_likelihood(suite, model, handles, u.data());
+  best = negative_log_likelihood(suite, model, handles, u.data(), likelihood);
   out.evaluations = context.evaluations;
   out.log_likelihood_after = -best;
 
   // Observed information in u: two passes of central differences, the second with steps of a
   // fifth of the first pass's standard errors.
-  auto f = [&](std::vector<double> x) { return negative_log_likelihood(suite, model, handles, x.data()); };
+  auto f = [&](std::vector<double> x) {
+    return negative_log_likelihood(suite, model, handles, x.data(), likelihood);
+  };
   std::vector<double> h(n);
   for (std::size_t i = 0; i < n; ++i) h[i] = 1e-2 * step[i];
   Eigen::MatrixXd H(n, n);
@@ -224,8 +246,29 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
       }
     }
   }
+  // The runs' scores by central differences with the same steps, for the sandwich.
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+  {
+    std::vector<std::vector<double>> scores(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      std::vector<double> up = u, down = u;
+      up[i] += h[i];
+      down[i] -= h[i];
+      const std::vector<double> a = run_terms(suite, model, handles, up, likelihood);
+      const std::vector<double> b = run_terms(suite, model, handles, down, likelihood);
+      for (std::size_t r = 0; r < a.size(); ++r) scores[i].push_back((a[r] - b[r]) / (2 * h[i]));
+    }
+    for (std::size_t r = 0; r < scores[0].size(); ++r) {
+      for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t j = 0; j < n; ++j) {
+          J(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) += scores[i][r] * scores[j][r];
+        }
+      }
+    }
+  }
   out.values.resize(static_cast<Eigen::Index>(n));
   out.stderrs.setConstant(static_cast<Eigen::Index>(n), kNaN);
+  out.robust_stderrs.setConstant(static_cast<Eigen::Index>(n), kNaN);
   out.covariance.setConstant(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n), kNaN);
   Eigen::VectorXd jacobian(n);
   for (std::size_t i = 0; i < n; ++i) {
@@ -236,6 +279,7 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
   if (llt.info() == Eigen::Success) {
     const Eigen::MatrixXd cov_u = llt.solve(Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n)));
     out.covariance = jacobian.asDiagonal() * cov_u * jacobian.asDiagonal();
+    const Eigen::MatrixXd robust = jacobian.asDiagonal() * cov_u * J * cov_u * jacobian.asDiagonal();
     for (std::size_t i = 0; i < n; ++i) {
       const auto k = static_cast<Eigen::Index>(i);
       const double se_u = std::sqrt(cov_u(k, k));
@@ -245,6 +289,7 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
                                "): the data do not determine it; no standard error");
       } else {
         out.stderrs(k) = std::sqrt(out.covariance(k, k));
+        out.robust_stderrs(k) = std::sqrt(robust(k, k));
       }
     }
   } else {
@@ -252,6 +297,8 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
         "the information matrix is singular: the data cannot tell these parameters apart "
         "(e.g. bumps.rate and bumps.sigma act only through rate sigma^2); no standard errors");
   }
+  // The derivative evaluations above moved the parameters; the result is the optimum.
+  apply(model, handles, u.data());
   out.model = model;
   return out;
 }

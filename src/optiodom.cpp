@@ -2,13 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
 
 #include "csv.hpp"
 #include "odomcov/error.hpp"
+#include "odomcov/format.hpp"
 
 namespace odomcov {
 namespace {
@@ -56,12 +56,6 @@ Metadata read_metadata(const fs::path& dir) {
   return m;
 }
 
-std::string num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
-
 }  // namespace
 
 std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
@@ -79,8 +73,8 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
   for (const Metadata& m : metas) {
     if (!options.wheelbase_m && m.wheelbase != wheelbase) {
       throw InputError(m.file, 0, "Li",
-                       "sessions disagree on the wheelbase (" + num(wheelbase) + " and " +
-                           num(m.wheelbase) + "); choose the nominal robot with --wheelbase");
+                       "sessions disagree on the wheelbase (" + format_number(wheelbase) + " and " +
+                           format_number(m.wheelbase) + "); choose the nominal robot with --wheelbase");
     }
     if (!options.diameters_m &&
         (m.diameters[1] != diameters.first || m.diameters[0] != diameters.second)) {
@@ -129,9 +123,9 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
         right += dr;
         turned += (dr - dl) / wheelbase;
         travel += std::abs(0.5 * (dl + dr));
-        log += num(t) + "," + num(left) + "," + num(right);
+        log += format_number(t) + "," + format_number(left) + "," + format_number(right);
         if (i + 1 == table.rows.size()) {
-          log += "," + num(reference.x()) + "," + num(reference.y()) + "," + num(reference.z());
+          log += "," + format_number(reference.x()) + "," + format_number(reference.y()) + "," + format_number(reference.z());
         } else {
           log += ",,,";
         }
@@ -156,13 +150,13 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
   }
   std::string yaml = "# Imported by `odomcov import optiodom` from the OptiOdom recordings\n"
                      "# (Sousa et al., J Intell Robot Syst 105:39, 2022; MIT licence).\n"
-                     "# Ticks to metres: pi D / (" + num(metas[0].gear) + " x " +
-                     num(metas[0].resolution) + "), no quadrature factor.\n";
+                     "# Ticks to metres: pi D / (" + format_number(metas[0].gear) + " x " +
+                     format_number(metas[0].resolution) + "), no quadrature factor.\n";
   yaml += "name: " + options.name + "\n";
-  yaml += "robot: {wheelbase: " + num(wheelbase) + ", k_left: " + num(options.k) +
-          ", k_right: " + num(options.k) + "}\n";
-  yaml += "measurement_noise: {xy: " + num(options.measurement_noise.xy_m) +
-          ", theta_deg: " + num(options.measurement_noise.theta_rad * 180.0 / M_PI) + "}\n";
+  yaml += "robot: {wheelbase: " + format_number(wheelbase) + ", k_left: " + format_number(options.k) +
+          ", k_right: " + format_number(options.k) + "}\n";
+  yaml += "measurement_noise: {xy: " + format_number(options.measurement_noise.xy_m) +
+          ", theta_deg: " + format_number(options.measurement_noise.theta_rad * 180.0 / M_PI) + "}\n";
   yaml += "experiments:\n";
   for (const auto& [name, logs] : experiments) {
     yaml += "  - name: " + name + "\n    logs:\n";

@@ -75,6 +75,25 @@ TEST(Fit, StandardErrorsHaveTheirNominalCoverage) {
   EXPECT_LE(misses, expected + z * std::sqrt(total * 0.05 * 0.95)) << misses << " of " << total;
 }
 
+TEST(Fit, ReturnsTheModelAtTheOptimum) {
+  // The standard errors need evaluations around the optimum; the model returned must still be
+  // the optimum itself, with the likelihood reported for it.
+  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "opt");
+  for (Likelihood kind : {Likelihood::full, Likelihood::scatter}) {
+    const FitResult r = fit(lab, suite_model(lab), {"turn_slip.k", "wheelbase_error.Eb"}, kind);
+    double k = -1, eb = -1;
+    for (const EffectSpec& e : r.model.effects) {
+      if (e.name == "turn_slip") k = e.values[0];
+      if (e.name == "wheelbase_error") eb = e.values[0];
+    }
+    EXPECT_EQ(k, r.values(0));
+    EXPECT_EQ(eb, r.values(1));
+    const auto res = residuals(lab, r.model);
+    EXPECT_DOUBLE_EQ(kind == Likelihood::full ? log_likelihood(res) : scatter_log_likelihood(res),
+                     r.log_likelihood_after);
+  }
+}
+
 TEST(Fit, AddsAnAbsentEffectAndFitsIt) {
   const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "std2");
   const FitResult r = fit(lab, suite_model(lab), {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"});

@@ -11,6 +11,7 @@
 #include <random>
 
 #include "odomcov/path.hpp"
+#include "quadrature.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {
@@ -45,40 +46,15 @@ Matrix3 kleeman_arc_cov(double dl, double dr, const WheelNoise& k, double B) {
   return a < 0 ? Matrix3(-C) : C;
 }
 
-/// Gauss-Legendre nodes and weights on [0, 1] (Newton on P_n; Golub-Welsch not needed at n=20).
-void gauss_legendre(int n, std::vector<double>& x, std::vector<double>& w) {
-  x.resize(n);
-  w.resize(n);
-  for (int i = 0; i < n; ++i) {
-    double z = std::cos(M_PI * (i + 0.75) / (n + 0.5));
-    double dp = 0.0;
-    for (int it = 0; it < 100; ++it) {
-      double p0 = 1.0, p1 = z;
-      for (int k = 2; k <= n; ++k) {
-        const double p2 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k;
-        p0 = p1;
-        p1 = p2;
-      }
-      dp = n * (z * p1 - p0) / (z * z - 1.0);
-      const double dz = p1 / dp;
-      z -= dz;
-      if (std::abs(dz) < 1e-16) break;
-    }
-    x[i] = 0.5 * (1.0 - z);
-    w[i] = 1.0 / ((1.0 - z * z) * dp * dp);  // 2/((1-z^2) P'^2) scaled by 1/2 for [0, 1]
-  }
-}
-
 /// int_0^1 Psi(v) N Psi(v)^T dv by composite Gauss-Legendre, with Psi built from std::sin/cos
 /// directly as printed in eq. (36) (erratum 1) with R a = d.
 Matrix3 quadrature_noise_covariance(double d, double a, const Matrix2& N) {
-  std::vector<double> x, w;
-  gauss_legendre(20, x, w);
+  static const auto rule = gauss_legendre_01<20>();
   const int panels = 64;
   Matrix3 sum = Matrix3::Zero();
   for (int p = 0; p < panels; ++p) {
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      const double v = (p + x[i]) / panels;
+    for (const auto& [x, w] : rule) {
+      const double v = (p + x) / panels;
       const double av = a * v;
       // d (1 - cos av)/a and d sin(av)/a, taking the a -> 0 limit exactly when a == 0; the
       // pointwise 1 - cos = 2 sin^2(av/2) keeps the oracle itself accurate for tiny a.
@@ -87,7 +63,7 @@ Matrix3 quadrature_noise_covariance(double d, double a, const Matrix2& N) {
       const double second = a == 0.0 ? d * v : d * std::sin(av) / a;
       Matrix32 psi;
       psi << first, std::cos(av), second, -std::sin(av), 1.0, 0.0;
-      sum += (w[i] / panels) * psi * N * psi.transpose();
+      sum += (w / panels) * psi * N * psi.transpose();
     }
   }
   return sum;

@@ -17,13 +17,21 @@ namespace odomcov {
 /// added, starting from its typical size. Returns "" or what is wrong.
 std::string check_fit_parameter(const std::string& name);
 
+/// What a fit maximises: the full Gaussian likelihood, or its scatter part only
+/// (scatter_log_likelihood), for parameters that act on the covariance alone.
+enum class Likelihood { full, scatter };
+
 struct FitResult {
   std::vector<std::string> names;
   Eigen::VectorXd values;
   Eigen::VectorXd stderrs;  // NaN where not identifiable or at a bound
   Eigen::MatrixXd covariance;  // of the estimates, from the observed information
+  /// Sandwich (Huber-White) standard errors, H^-1 J H^-1 with J the sum of the runs' score
+  /// outer products: valid when the errors are not Gaussian (bumps), where the observed
+  /// information understates the uncertainty of a variance.
+  Eigen::VectorXd robust_stderrs;
   double log_likelihood_before = 0.0;  // the starting model (added effects at neutral)
-  double log_likelihood_after = 0.0;
+  double log_likelihood_after = 0.0;   // of the kind maximised
   int evaluations = 0;
   std::vector<std::string> warnings;
   SuiteModel model;  // the fitted model
@@ -34,8 +42,10 @@ struct FitResult {
 /// unbounded or simply bounded (log for positive scales, atanh for a correlation, square root
 /// for variance-like sizes that may be 0). Standard errors come from the observed information:
 /// the inverse of the numerical Hessian of -log L at the optimum, by central differences with
-/// steps set to a fifth of a first estimate of each standard error.
-FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names);
+/// steps set to a fifth of a first estimate of each standard error; and robust ones from the
+/// sandwich with the runs' numerical scores.
+FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names,
+              Likelihood likelihood = Likelihood::full);
 
 struct UmbmarkResult {
   double side_m = 0.0;

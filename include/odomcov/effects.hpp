@@ -37,6 +37,12 @@ struct EffectInfo {
   std::string physics;    // what it is, in plain words
   std::string signature;  // how it shows in the data
   std::string summary;    // the SPEC catalogue's one-line definition
+  /// True when the effect moves the mean (a systematic error: Ed, Eb, Es); false when it only
+  /// adds randomness, which shows in the covariance (and the tails).
+  bool systematic = false;
+  /// True when the effect makes the errors non-Gaussian (heavy tails): a model with it expects
+  /// the kurtosis compare tests for.
+  bool heavy_tails = false;
 };
 
 /// Every effect of the catalogue, in SPEC order.

@@ -23,6 +23,7 @@ void setup_compare(CLI::App& app, int& exit_code);
 void setup_fit(CLI::App& app, int& exit_code);
 void setup_umbmark(CLI::App& app, int& exit_code);
 void setup_import(CLI::App& app, int& exit_code);
+void setup_diagnose(CLI::App& app, int& exit_code);
 
 /// The report and JSON of `compare` (SPEC "JSON of compare"), shared with `diagnose`.
 std::string comparison_text(const Suite& suite, const Comparison& c);

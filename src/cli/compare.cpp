@@ -44,14 +44,17 @@ std::string comparison_text(const Suite& suite, const Comparison& c) {
                             moments_text(e.measured.mean, e.measured.cov),
                         "predicted\n" + moments_text(e.predicted_mean, e.predicted_cov))
         << "  mean (" << (e.n > 3 ? "Hotelling T^2" : "chi^2") << "): " << test_text(e.mean_test)
-        << "\n  covariance (" << (e.cov_method == "lrt" ? "LRT" : "NEES sum, two-sided")
+        << "\n  covariance ("
+        << (e.cov_method == "nees" ? std::string("NEES sum, two-sided")
+                                   : e.cov_method == "lrt" ? std::string("LRT") : e.cov_method)
         << "): " << test_text(e.cov_test) << "\n  NEES mean " << fixed(e.nees_mean, 3)
         << " (expected 3), outside the 95% bound: " << fixed(100 * e.outside_95, 1)
         << "%, log-likelihood " << fixed(e.log_likelihood, 2) << "\n";
   }
   out << "\nSuite: log-likelihood " << fixed(c.log_likelihood, 2) << "; Mardia kurtosis "
-      << (c.kurtosis.valid ? fixed(c.mardia_b2, 2) + " (Gaussian 15), p = " + sci(c.kurtosis.p_value, 2)
-                           : std::string("n/a"))
+      << (c.kurtosis.valid ? fixed(c.mardia_b2, 2) + " (Gaussian " + fixed(c.mardia_expected, 2) +
+                                 "), p = " + sci(c.kurtosis.p_value, 2)
+                           : std::string("n/a (no experiment has 10 runs)"))
       << "\nverdict: " << c.verdict << "\n";
   if (!c.failures.empty()) {
     out << "Where it fails (worst first):\n";
@@ -82,6 +85,8 @@ json comparison_json(const Suite& suite, const Comparison& c) {
   }
   json kurtosis = test_json(c.kurtosis);
   kurtosis["b2"] = c.mardia_b2;
+  kurtosis["b2_gaussian"] = c.mardia_expected;
+  kurtosis["lrt_scale"] = c.kurtosis_scale;
   return {{"suite", suite.name},
           {"alpha", c.alpha},
           {"alpha_per_test", c.alpha_per_test},

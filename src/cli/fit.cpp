@@ -35,24 +35,26 @@ int run_fit(const FitOptions& opt) {
   std::ostringstream out;
   out << "odomcov fit: " << suite.name << " (" << suite.experiments.size()
       << " experiments), maximum likelihood\n";
-  json parameters = json::object(), stderrs = json::object();
+  json parameters = json::object(), stderrs = json::object(), robust = json::object();
   for (std::size_t i = 0; i < r.names.size(); ++i) {
     const auto k = static_cast<Eigen::Index>(i);
     const double se = r.stderrs(k);
     char line[160];
     std::snprintf(line, sizeof line, "  %-32s %.6g", r.names[i].c_str(), r.values(k));
-    out << line << (std::isfinite(se) ? " +/- " + sci(se, 2) : std::string(" (no standard error)"))
+    const double rse = r.robust_stderrs(k);
+    out << line
+        << (std::isfinite(se) ? " +/- " + sci(se, 2) + " (robust +/- " + sci(rse, 2) + ")"
+                              : std::string(" (no standard error)"))
         << "\n";
     parameters[r.names[i]] = r.values(k);
     stderrs[r.names[i]] = std::isfinite(se) ? json(se) : json(nullptr);
+    robust[r.names[i]] = std::isfinite(rse) ? json(rse) : json(nullptr);
   }
   out << "log-likelihood: " << fixed(r.log_likelihood_before, 3) << " before, "
       << fixed(r.log_likelihood_after, 3) << " after (" << r.evaluations << " evaluations)\n";
   for (const std::string& w : r.warnings) out << "warning: " << w << "\n";
-  if (!r.model.effects.empty()) {
-    out << "model.effects to paste into the suite:\n  effects:\n";
-    for (const EffectSpec& e : r.model.effects) out << "    " << effect_yaml(e) << "\n";
-  }
+  out << "the fitted model, to paste over the suite's robot line and model block:\n"
+      << model_yaml(r.model);
   std::cout << out.str();
   if (!opt.json.empty()) {
     json corr = json::array();
@@ -66,10 +68,12 @@ int run_fit(const FitOptions& opt) {
     }
     write_json_atomic(opt.json, {{"parameters", parameters},
                                  {"stderr", stderrs},
+                                 {"stderr_robust", robust},
                                  {"correlation", corr},
                                  {"log_likelihood_before", r.log_likelihood_before},
                                  {"log_likelihood_after", r.log_likelihood_after},
                                  {"evaluations", r.evaluations},
+                                 {"yaml", model_yaml(r.model)},
                                  {"warnings", r.warnings}});
   }
   return kExitOk;

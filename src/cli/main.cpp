@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   setup_compare(app, exit_code);
   setup_fit(app, exit_code);
   setup_umbmark(app, exit_code);
+  setup_diagnose(app, exit_code);
   setup_import(app, exit_code);
   try {
     app.parse(argc, argv);

@@ -1,12 +1,12 @@
 // odomcov sweep SWEEP.yaml [--out CSV] [--shard I/N] [--threads T] [--alpha A] [--json FILE]
 // One Monte-Carlo validation per grid point, one CSV row each (SPEC "Sweep file").
 #include <csignal>
-#include <cstdio>
 #include <fstream>
 #include <iostream>
 #include <regex>
 
 #include "commands.hpp"
+#include "odomcov/format.hpp"
 #include "odomcov/sweep.hpp"
 #include "output.hpp"
 #include "progress.hpp"
@@ -32,12 +32,6 @@ extern "C" void on_interrupt(int) {
   if (Progress* p = g_running.load()) p->cancel.store(true);
 }
 
-std::string number(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
-
 std::pair<std::size_t, std::size_t> parse_shard(const std::string& text) {
   static const std::regex pattern(R"((\d+)/(\d+))");
   std::smatch m;
@@ -50,11 +44,11 @@ std::pair<std::size_t, std::size_t> parse_shard(const std::string& text) {
 std::string csv_row(const SweepPlan& plan, std::size_t point, const Validation& v) {
   const SweepMetrics m = sweep_metrics(v);
   std::string row;
-  for (double value : plan.point_values(point)) row += number(value) + ",";
+  for (double value : plan.point_values(point)) row += format_number(value) + ",";
   row += std::to_string(v.runs) + "," + std::to_string(v.seed);
   for (double x : {m.std_rel_err.x(), m.std_rel_err.y(), m.std_rel_err.z(), m.max_corr_diff,
                    m.bias_se.x(), m.bias_se.y(), m.bias_se.z(), m.p_mean, m.p_cov, m.nees_mean}) {
-    row += "," + number(x);
+    row += "," + format_number(x);
   }
   return row + "," + m.verdict + "\n";
 }

@@ -55,7 +55,9 @@ EffectType bumps_type() {
            "heavy tails: a few runs far out (Mardia kurtosis above 15), with variance growing "
            "with distance like wheel noise",
            "Poisson impulses at rate per metre of mean wheel travel, each N(0, sigma^2) on one "
-           "wheel"},
+           "wheel",
+           /*systematic=*/false,
+           /*heavy_tails=*/true},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<Bumps>(v[0], v[1]);
           }};

@@ -1,18 +1,9 @@
 #include <cmath>
-#include <cstdio>
 
 #include "effect.hpp"
+#include "odomcov/format.hpp"
 
 namespace odomcov {
-namespace {
-
-std::string number(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
-
-}  // namespace
 
 const std::vector<EffectInfo>& effect_catalogue() {
   static const std::vector<EffectInfo> infos = [] {
@@ -43,9 +34,9 @@ std::string check_effect(const EffectSpec& spec) {
     const bool below = p.open_lower ? !(v > p.lower) : !(v >= p.lower);
     const bool above = p.open_upper ? !(v < p.upper) : !(v <= p.upper);
     if (below || above) {
-      std::string range = (p.open_lower ? "(" : "[") + number(p.lower) + ", ";
-      range += p.upper >= 1e300 ? std::string("inf)") : number(p.upper) + (p.open_upper ? ")" : "]");
-      return p.name + " must be in " + range + ", got " + number(v);
+      std::string range = (p.open_lower ? "(" : "[") + format_number(p.lower) + ", ";
+      range += p.upper >= 1e300 ? std::string("inf)") : format_number(p.upper) + (p.open_upper ? ")" : "]");
+      return p.name + " must be in " + range + ", got " + format_number(v);
     }
   }
   return "";
@@ -56,7 +47,7 @@ std::string effect_yaml(const EffectSpec& spec) {
   std::string text = "- " + spec.name + ": {";
   for (std::size_t i = 0; i < spec.values.size(); ++i) {
     text += (i ? ", " : "") + (info ? info->parameters[i].name : "p" + std::to_string(i)) + ": " +
-            number(spec.values[i]);
+            format_number(spec.values[i]);
   }
   return text + "}";
 }

@@ -38,7 +38,8 @@ EffectType per_run_radius_type() {
            "wheel radii that change from run to run (tyre pressure, load, temperature)",
            "variance grows as distance squared instead of linearly; each run keeps its own "
            "drift throughout",
-           "each wheel's radius off by a relative N(0, sigma^2), drawn once per run"},
+           "each wheel's radius off by a relative N(0, sigma^2), drawn once per run",
+           /*systematic=*/false},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<PerRunRadius>(v[0]);
           }};

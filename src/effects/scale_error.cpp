@@ -29,7 +29,8 @@ EffectType scale_error_type() {
            "a wrong distance scale (mean wheel diameter or encoder resolution)",
            "along-track error proportional to distance on straight lines, plus a heading error "
            "proportional to the angle turned",
-           "both wheels' true travel x Es"},
+           "both wheels' true travel x Es",
+           /*systematic=*/true},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<ScaleError>(v[0]);
           }};

@@ -38,7 +38,8 @@ EffectType turn_slip_type() {
            "wheels slipping sideways against each other while the robot turns",
            "extra heading variance in proportion to the angle turned; straight lines and the "
            "mean unaffected",
-           "extra heading variance k^2 |dtheta| per sample"},
+           "extra heading variance k^2 |dtheta| per sample",
+           /*systematic=*/false},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<TurnSlip>(v[0]);
           }};

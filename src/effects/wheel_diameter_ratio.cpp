@@ -31,7 +31,8 @@ EffectType wheel_diameter_ratio_type() {
            "unequal wheel diameters (Ed = D_R/D_L)",
            "heading drifts on straight lines in proportion to distance (lateral error grows as "
            "distance squared); turns in either sense drift the same way",
-           "true dL = dL 2/(Ed+1), dR = dR 2 Ed/(Ed+1)"},
+           "true dL = dL 2/(Ed+1), dR = dR 2 Ed/(Ed+1)",
+           /*systematic=*/true},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<WheelDiameterRatio>(v[0]);
           }};

@@ -35,7 +35,8 @@ EffectType wheel_noise_correlation_type() {
            "correlated left and right wheel errors",
            "no bias; rho > 0 inflates along-track variance and shrinks heading variance "
            "(rho < 0 the reverse), so the two cannot both fit an uncorrelated model",
-           "correlation of the left and right per-sample noise"},
+           "correlation of the left and right per-sample noise",
+           /*systematic=*/false},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<WheelNoiseCorrelation>(v[0]);
           }};

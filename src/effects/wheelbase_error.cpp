@@ -25,7 +25,8 @@ EffectType wheelbase_error_type() {
            "a wrong wheelbase (true wheelbase = Eb B)",
            "heading error proportional to the angle turned, changing sign with the turn "
            "direction; straight lines unaffected",
-           "true wheelbase = Eb B"},
+           "true wheelbase = Eb B",
+           /*systematic=*/true},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<WheelbaseError>(v[0]);
           }};

@@ -1,0 +1,129 @@
+// odomcov diagnose SUITE.yaml [--effects a,b,...] [--alpha A] [--json FILE]
+// Which physical effect is the model missing? Fitted size, evidence, and the YAML to add it.
+#include <cmath>
+#include <iostream>
+#include <sstream>
+
+#include "commands.hpp"
+#include "odomcov/diagnosis.hpp"
+#include "output.hpp"
+
+namespace odomcov::cli {
+namespace {
+
+struct DiagnoseOptions {
+  std::string suite;
+  std::vector<std::string> effects;
+  double alpha = kDiagnoseAlpha;
+  std::string json;
+};
+
+json summary_json(const ModelSummary& s) {
+  return {{"log_likelihood", s.log_likelihood}, {"nees_mean", s.nees_mean}, {"verdict", s.verdict}};
+}
+
+json values_json(const Candidate& c, const std::vector<double>& values) {
+  json out = json::object();
+  for (std::size_t i = 0; i < c.parameters.size(); ++i) {
+    out[c.parameters[i]] = std::isfinite(values[i]) ? json(values[i]) : json(nullptr);
+  }
+  return out;
+}
+
+int run_diagnose(const DiagnoseOptions& opt) {
+  if (!(opt.alpha > 0.0 && opt.alpha < 1.0)) throw UsageError("--alpha must be in (0, 1)");
+  for (const std::string& e : opt.effects) {
+    if (e != kWheelNoiseLevel && !find_effect(e)) throw UsageError("--effects: unknown effect '" + e + "'");
+  }
+  if (!opt.json.empty()) check_output_path(opt.json);
+  const Suite suite = load_suite(opt.suite);
+  const SuiteModel model = suite_model(suite);
+  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects);
+
+  std::ostringstream out;
+  out << "odomcov diagnose: " << suite.name << " (" << d.runs << " runs), family-wise alpha = "
+      << d.alpha << " over " << d.candidates.size() << " candidates\n"
+      << "before: log-likelihood " << fixed(d.before.log_likelihood, 2) << ", NEES mean "
+      << fixed(d.before.nees_mean, 3) << ", " << d.before.verdict << "\n"
+      << "tails: " << (d.kurtosis.valid ? std::string(d.heavy_tails ? "heavy" : "Gaussian") +
+                                              " (Mardia kurtosis z = " + fixed(d.kurtosis.statistic, 2) +
+                                              ", p = " + sci(d.kurtosis.p_value, 2) + ")"
+                                        : std::string("not testable (no experiment has 10 runs)"))
+      << "\n\n  candidate                  d logL   (of)        d BIC   p-value     significant\n";
+  for (const Candidate& c : d.candidates) {
+    char line[200];
+    std::snprintf(line, sizeof line, "  %-24s %10.2f %-8s %10.2f   %-10.3g  %s\n", c.effect.c_str(),
+                  c.delta_log_likelihood, c.systematic ? "full" : "scatter", c.delta_bic, c.p_value,
+                  c.significant ? "yes" : "no");
+    out << line;
+  }
+  if (d.best) {
+    const Candidate& b = d.candidates[*d.best];
+    out << "\nMissing: " << explain(b) << "\n"
+        << "Add it to the suite:\n" << (b.effect == kWheelNoiseLevel ? "  " : "  model:\n    effects:\n      ")
+        << candidate_yaml(b, model) << "\n"
+        << "or the whole model, every effect refitted with it:\n" << model_yaml(b.model)
+        << "after: log-likelihood " << fixed(d.after.log_likelihood, 2) << ", NEES mean "
+        << fixed(d.after.nees_mean, 3) << ", " << d.after.verdict << "\n";
+  } else {
+    out << "\nNo candidate is significant: the model already explains your data.\n";
+  }
+  std::cout << out.str();
+
+  if (!opt.json.empty()) {
+    json candidates = json::array();
+    for (const Candidate& c : d.candidates) {
+      json evidence = json::array();
+      for (const auto& [name, gain] : c.evidence) evidence.push_back({{"experiment", name}, {"delta_log_likelihood", gain}});
+      candidates.push_back({{"effect", c.effect},
+                            {"parameters", values_json(c, c.values)},
+                            {"stderr", values_json(c, c.stderrs)},
+                            {"delta_log_likelihood", c.delta_log_likelihood},
+                            {"likelihood", c.systematic ? "full" : "scatter"},
+                            {"delta_full_log_likelihood", c.delta_full_log_likelihood},
+                            {"delta_bic", c.delta_bic},
+                            {"p_value", c.p_value},
+                            {"dof", c.dof},
+                            {"significant", c.significant},
+                            {"evidence", evidence},
+                            {"explanation", explain(c)},
+                            {"yaml", candidate_yaml(c, model)}});
+    }
+    json best = nullptr;
+    json after = summary_json(d.after);
+    if (d.best) {
+      const Candidate& b = d.candidates[*d.best];
+      best = {{"effect", b.effect}, {"parameters", values_json(b, b.values)}};
+      after["yaml"] = model_yaml(b.model);
+    }
+    json kurtosis = test_json(d.kurtosis);
+    kurtosis["heavy_tails"] = d.heavy_tails;
+    write_json_atomic(opt.json, {{"suite", suite.name},
+                                 {"alpha", d.alpha},
+                                 {"runs", d.runs},
+                                 {"before", summary_json(d.before)},
+                                 {"kurtosis", kurtosis},
+                                 {"candidates", candidates},
+                                 {"best", best},
+                                 {"after", after}});
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void setup_diagnose(CLI::App& app, int& exit_code) {
+  auto opt = std::make_shared<DiagnoseOptions>();
+  CLI::App* cmd = app.add_subcommand("diagnose", "Which physical effect is the model missing?");
+  cmd->add_option("suite", opt->suite, "Measurement suite (YAML)")->required();
+  cmd->add_option("--effects", opt->effects,
+                  "Candidates to try (default: every catalogue effect not in the model, and "
+                  "wheel_noise_level)")
+      ->delimiter(',');
+  cmd->add_option("--alpha", opt->alpha, "Family-wise significance level over the candidates")
+      ->capture_default_str();
+  cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
+  cmd->callback([opt, &exit_code] { exit_code = run_diagnose(*opt); });
+}
+
+}  // namespace odomcov::cli

@@ -1,0 +1,323 @@
+#include "odomcov/diagnosis.hpp"
+
+#include <algorithm>
+#include <boost/math/distributions/chi_squared.hpp>
+#include <cmath>
+#include <limits>
+
+#include "odomcov/format.hpp"
+
+namespace odomcov {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::size_t run_count(const Suite& suite) {
+  std::size_t n = 0;
+  for (const SuiteExperiment& e : suite.experiments) n += e.runs.size();
+  return n;
+}
+
+ModelSummary summarise(const Comparison& c) {
+  ModelSummary s;
+  s.log_likelihood = c.log_likelihood;
+  s.verdict = c.verdict;
+  double runs = 0;
+  for (const ExperimentComparison& e : c.experiments) {
+    s.nees_mean += e.nees_mean * static_cast<double>(e.n);
+    runs += static_cast<double>(e.n);
+  }
+  s.nees_mean /= runs;
+  return s;
+}
+
+std::vector<double> experiment_log_likelihoods(const Suite& suite, const SuiteModel& model) {
+  std::vector<double> out;
+  for (const auto& ex : residuals(suite, model)) out.push_back(log_likelihood({ex}));
+  return out;
+}
+
+/// Systematic candidates move the mean and are judged on the full likelihood; the others only
+/// add randomness and are judged on the scatter part, which a mean misfit cannot inflate.
+bool systematic(const std::string& effect) {
+  return effect != kWheelNoiseLevel && find_effect(effect)->systematic;
+}
+
+/// The parameters a candidate fits. bumps: only the rate; a Gaussian likelihood sees rate and
+/// sigma only through rate sigma^2, so sigma stays at its typical size there (see bumps_sigma).
+std::vector<std::string> fitted_names(const std::string& effect) {
+  if (effect == kWheelNoiseLevel) return {"k_left", "k_right"};
+  if (effect == "bumps") return {"bumps.rate"};
+  std::vector<std::string> names;
+  for (const EffectParameterInfo& p : find_effect(effect)->parameters) names.push_back(effect + "." + p.name);
+  return names;
+}
+
+/// Refits every effect of a model by the part of the likelihood it explains, as a block
+/// coordinate step: the systematic effects on the full likelihood (random ones held), then the
+/// random effects on the scatter part (systematic ones held). A random effect is thus never
+/// sized by a mean misfit, and a systematic one always sees the spread the random ones give.
+SuiteModel refit(const Suite& suite, const SuiteModel& model) {
+  std::vector<std::string> systematic_names, random_names;
+  for (const EffectSpec& e : model.effects) {
+    for (const std::string& n : fitted_names(e.name)) {
+      (systematic(e.name) ? systematic_names : random_names).push_back(n);
+    }
+  }
+  SuiteModel out = model;
+  if (!systematic_names.empty()) out = fit(suite, out, systematic_names, Likelihood::full).model;
+  if (!random_names.empty()) out = fit(suite, out, random_names, Likelihood::scatter).model;
+  return out;
+}
+
+/// True when every fitted parameter's "no effect" value is the edge of its range (a size that
+/// cannot be negative): the likelihood-ratio statistic is then a 50:50 mixture of chi^2_0 and
+/// chi^2_dof [Self87], so the p-value is half the chi^2 one.
+bool on_boundary(const std::string& effect) {
+  if (effect == kWheelNoiseLevel) return false;
+  for (const EffectParameterInfo& p : find_effect(effect)->parameters) {
+    if (!(p.neutral == p.lower && !p.open_lower)) return false;
+  }
+  return true;
+}
+
+/// Sample excess kurtosis, bias-corrected (G2 of Joanes & Gill 1998).
+double excess_kurtosis(const std::vector<double>& x) {
+  const double n = static_cast<double>(x.size());
+  double mean = 0;
+  for (double v : x) mean += v / n;
+  double m2 = 0, m4 = 0;
+  for (double v : x) {
+    const double d = v - mean;
+    m2 += d * d / n;
+    m4 += d * d * d * d / n;
+  }
+  const double g2 = m4 / (m2 * m2) - 3.0;
+  return ((n + 1) * g2 + 6) * (n - 1) / ((n - 2) * (n - 3));
+}
+
+/// bumps' sigma by the method of moments on the straight-line experiments: along a line a bump
+/// J on one wheel moves the along-track error by J/2, so with Lambda = rate d bumps per run the
+/// fourth cumulant of the along-track error is 3 Lambda sigma^4/16 = (3/16) rate sigma^4 d,
+/// while q = rate sigma^2 is what the likelihood fitted. Pooling the lines (each cumulant from
+/// its sample excess kurtosis times its variance squared, weighted by travel) gives
+/// rate sigma^4 = (16/3) sum kappa4 / sum d and sigma^2 = rate sigma^4 / q. Returns NaN when no
+/// straight experiment of ten runs or more shows heavy tails.
+double bumps_sigma(const Suite& suite, double q) {
+  double cumulant = 0.0, travel = 0.0;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    if (ex.logged || ex.runs.size() < 10) continue;
+    double d = 0;
+    bool straight = true;
+    for (std::size_t i = 0; i < ex.path.interval_count(); ++i) {
+      const ArcSegment s = ex.path.interval(i);
+      straight = straight && s.left_m == s.right_m;
+      d += std::abs(s.center_m());
+    }
+    if (!straight || d <= 0) continue;
+    std::vector<double> along;
+    for (const SuiteRun& r : ex.runs) along.push_back(r.error().x());
+    double mean = 0, var = 0;
+    for (double v : along) mean += v / static_cast<double>(along.size());
+    for (double v : along) var += (v - mean) * (v - mean) / static_cast<double>(along.size() - 1);
+    cumulant += excess_kurtosis(along) * var * var;
+    travel += d;
+  }
+  if (!(travel > 0 && cumulant > 0 && q > 0)) return kNaN;
+  return std::sqrt(16.0 / 3.0 * cumulant / travel / q);
+}
+
+}  // namespace
+
+Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
+                   const std::vector<std::string>& only) {
+  Diagnosis d;
+  d.alpha = alpha;
+  d.runs = run_count(suite);
+  const Comparison before = compare(suite, model, alpha);
+  d.before = summarise(before);
+  d.kurtosis = before.kurtosis;
+  d.heavy_tails = d.kurtosis.valid && d.kurtosis.statistic > 0 && d.kurtosis.p_value < alpha;
+
+  // The model's own effects, refitted: the reference every candidate must improve on. Each
+  // candidate refits the model's effects of its own kind with it (systematic ones on the full
+  // likelihood, random ones on the scatter part); the others stay at their refitted values.
+  std::vector<std::string> nuisance_systematic, nuisance_random;
+  for (const EffectSpec& e : model.effects) {
+    for (const std::string& n : fitted_names(e.name)) {
+      (systematic(e.name) ? nuisance_systematic : nuisance_random).push_back(n);
+    }
+  }
+  const SuiteModel base = refit(suite, model);
+  const auto base_residuals = residuals(suite, base);
+  const double base_full = log_likelihood(base_residuals);
+  const double base_scatter = scatter_log_likelihood(base_residuals);
+  const std::vector<double> base_by_experiment = experiment_log_likelihoods(suite, base);
+
+  std::vector<std::string> names;
+  for (const EffectInfo& info : effect_catalogue()) {
+    bool in_model = false;
+    for (const EffectSpec& e : model.effects) in_model = in_model || e.name == info.name;
+    if (!in_model) names.push_back(info.name);
+  }
+  names.push_back(kWheelNoiseLevel);
+  if (!only.empty()) {
+    std::vector<std::string> kept;
+    for (const std::string& n : names) {
+      if (std::find(only.begin(), only.end(), n) != only.end()) kept.push_back(n);
+    }
+    names = kept;
+  }
+
+  const double log_runs = std::log(static_cast<double>(d.runs));
+  for (const std::string& name : names) {
+    Candidate c;
+    c.effect = name;
+    c.systematic = systematic(name);
+    std::vector<std::string> fitted = c.systematic ? nuisance_systematic : nuisance_random;
+    const std::vector<std::string> own = fitted_names(name);
+    fitted.insert(fitted.end(), own.begin(), own.end());
+    const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
+    const FitResult f = fit(suite, base, fitted, kind);
+    // With heavy tails the observed information understates the uncertainty: sandwich SEs.
+    const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
+    c.model = f.model;
+    c.dof = static_cast<int>(own.size());
+    // Each candidate is judged on the part of the likelihood it explains: the full one for a
+    // systematic effect, the scatter part for a random one (whose extra variance would
+    // otherwise also "explain" any mean misfit). The gains are on one scale; delta BIC ranks.
+    c.delta_full_log_likelihood = log_likelihood(residuals(suite, c.model)) - base_full;
+    c.delta_log_likelihood = f.log_likelihood_after - (c.systematic ? base_full : base_scatter);
+    c.delta_bic = -2.0 * c.delta_log_likelihood + c.dof * log_runs;
+    double lr = 2.0 * c.delta_log_likelihood;
+    // Heavy tails widen the null distribution of a Gaussian variance LRT by the kurtosis factor
+    // (the scaled test of [Browne84]); the same factor compare uses.
+    if (!c.systematic && d.heavy_tails && before.mardia_b2 > before.mardia_expected) {
+      lr /= before.mardia_b2 / before.mardia_expected;
+    }
+    lr = std::max(0.0, lr);
+    c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
+    const auto offset = static_cast<Eigen::Index>(fitted.size() - own.size());
+    if (name == kWheelNoiseLevel) {
+      c.parameters = {"k_left", "k_right"};
+      c.values = {f.values(offset), f.values(offset + 1)};
+      c.stderrs = {se(offset), se(offset + 1)};
+    } else if (name == "bumps") {
+      // q = rate sigma^2 is what the likelihood fitted; sigma comes from the tails.
+      EffectSpec* spec = nullptr;
+      for (EffectSpec& e : c.model.effects) spec = e.name == "bumps" ? &e : spec;
+      const double sigma_fixed = spec->values[1];
+      const double q = f.values(offset) * sigma_fixed * sigma_fixed;
+      const double q_se = se(offset) * sigma_fixed * sigma_fixed;
+      const double sigma = bumps_sigma(suite, q);
+      const double s = std::isfinite(sigma) ? sigma : sigma_fixed;
+      spec->values = {q / (s * s), s};
+      c.parameters = {"rate", "sigma"};
+      c.values = spec->values;
+      c.stderrs = {q_se / (s * s), kNaN};
+      c.note = "rate sigma^2 = " + format_number(q, "%.3g") + " +/- " + format_number(q_se, "%.1g") +
+               " m (what the means and covariances determine); " +
+               (std::isfinite(sigma) ? "sigma from the excess kurtosis of the along-track errors on "
+                                       "the straight lines (a moment estimate, no standard error)"
+                                     : "sigma undetermined (no straight line with heavy tails), "
+                                       "kept at " + format_number(s, "%.3g") + " m");
+    } else {
+      for (std::size_t i = 0; i < own.size(); ++i) {
+        c.parameters.push_back(own[i].substr(name.size() + 1));
+        c.values.push_back(f.values(offset + static_cast<Eigen::Index>(i)));
+        c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
+      }
+    }
+    const std::vector<double> by_experiment = experiment_log_likelihoods(suite, c.model);
+    std::vector<std::pair<std::string, double>> gains;
+    for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+      gains.push_back({suite.experiments[e].name, by_experiment[e] - base_by_experiment[e]});
+    }
+    std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.second > b.second; });
+    for (std::size_t i = 0; i < gains.size() && i < 2; ++i) {
+      if (gains[i].second > 0) c.evidence.push_back(gains[i]);
+    }
+    d.candidates.push_back(std::move(c));
+  }
+
+  const double per_candidate = alpha / static_cast<double>(std::max<std::size_t>(1, d.candidates.size()));
+  for (Candidate& c : d.candidates) c.significant = c.p_value < per_candidate;
+  // Ranking: significant candidates first, each group by delta BIC.
+  std::stable_sort(d.candidates.begin(), d.candidates.end(), [&](const Candidate& a, const Candidate& b) {
+    return a.significant != b.significant ? a.significant : a.delta_bic < b.delta_bic;
+  });
+  // The signature rule for the pair a Gaussian likelihood cannot separate: the one the tails
+  // speak against moves to just below the other (the rest of the order stands).
+  auto at = [&](const std::string& n) {
+    return std::find_if(d.candidates.begin(), d.candidates.end(),
+                        [&](const Candidate& c) { return c.effect == n; });
+  };
+  auto bumps = at("bumps"), level = at(kWheelNoiseLevel);
+  if (bumps != d.candidates.end() && level != d.candidates.end() && bumps->significant &&
+      level->significant) {
+    const bool bumps_first = bumps < level;
+    if (d.heavy_tails != bumps_first) {
+      auto loser = d.heavy_tails ? level : bumps;
+      auto winner = d.heavy_tails ? bumps : level;
+      std::rotate(loser, loser + 1, winner + 1);  // loser now sits right after the winner
+    }
+  }
+  if (!d.candidates.empty() && d.candidates.front().significant) {
+    d.best = 0;
+    // The model to adopt: everything refitted by its part of the likelihood, now that the new
+    // effect is in (the earlier effects were sized without it).
+    Candidate& best = d.candidates.front();
+    best.model = refit(suite, best.model);
+    if (best.effect == kWheelNoiseLevel) {
+      best.values = {best.model.robot.noise.k_left, best.model.robot.noise.k_right};
+    } else {
+      for (const EffectSpec& e : best.model.effects) {
+        if (e.name == best.effect) best.values = e.values;  // bumps: sigma stays, rate refitted
+      }
+    }
+  }
+  d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, alpha)) : d.before;
+  return d;
+}
+
+std::string explain(const Candidate& c) {
+  std::string text;
+  std::string signature;
+  if (c.effect == kWheelNoiseLevel) {
+    text = "wheel noise at another level than the model's: ";
+    signature = "variance off in every experiment, growing with distance as wheel noise does";
+  } else {
+    const EffectInfo* info = find_effect(c.effect);
+    text = info->physics + ": ";
+    signature = info->signature;
+  }
+  for (std::size_t i = 0; i < c.parameters.size(); ++i) {
+    text += (i ? ", " : "") + c.parameters[i] + " = " + format_number(c.values[i], "%.6g");
+    if (std::isfinite(c.stderrs[i])) text += " +/- " + format_number(c.stderrs[i], "%.1g");
+  }
+  text += "; " + signature;
+  if (!c.evidence.empty()) {
+    text += "; it showed most in " + c.evidence[0].first + " (log-likelihood +" +
+            format_number(c.evidence[0].second, "%.3g") + ")";
+    if (c.evidence.size() > 1) {
+      text += " and " + c.evidence[1].first + " (+" + format_number(c.evidence[1].second, "%.3g") + ")";
+    }
+  }
+  if (!c.note.empty()) text += " [" + c.note + "]";
+  return text;
+}
+
+std::string candidate_yaml(const Candidate& c, const SuiteModel& model) {
+  if (c.effect == kWheelNoiseLevel) {
+    Robot robot = model.robot;
+    robot.noise.k_left = c.values[0];
+    robot.noise.k_right = c.values[1];
+    return robot_yaml(robot);
+  }
+  for (const EffectSpec& e : c.model.effects) {
+    if (e.name == c.effect) return effect_yaml(e);
+  }
+  return "";
+}
+
+}  // namespace odomcov
