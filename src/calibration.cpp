@@ -123,19 +123,25 @@ double likelihood_of(const Suite& suite, const SuiteModel& model, Likelihood kin
   return kind == Likelihood::full ? log_likelihood(res) : scatter_log_likelihood(res);
 }
 
+/// Each run's term of the log-likelihood at the coordinates u.
 std::vector<double> run_terms(const Suite& suite, SuiteModel& model,
-                              const std::vector<Handle>& handles, const std::vector<double>& u,
+                              const std::vector<Handle>& handles, const double* u,
                               Likelihood kind) {
-  apply(model, handles, u.data());
+  apply(model, handles, u);
   return run_log_likelihoods(residuals(suite, model), kind == Likelihood::scatter);
+}
+
+/// -log L from the runs' terms; 1e300 where it is not finite (a wall for the optimiser).
+double negative_sum(const std::vector<double>& terms) {
+  double ll = 0.0;
+  for (double t : terms) ll += t;
+  return std::isfinite(ll) ? -ll : 1e300;
 }
 
 double negative_log_likelihood(const Suite& suite, SuiteModel& model,
                                const std::vector<Handle>& handles, const double* u,
                                Likelihood kind) {
-  apply(model, handles, u);
-  const double ll = likelihood_of(suite, model, kind);
-  return std::isfinite(ll) ? -ll : 1e300;
+  return negative_sum(run_terms(suite, model, handles, u, kind));
 }
 
 }  // namespace
@@ -220,24 +226,31 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
 
   // Observed information in u: two passes of central differences, the second with steps of a
   // fifth of the first pass's standard errors.
-  auto f = [&](std::vector<double> x) {
-    return negative_log_likelihood(suite, model, handles, x.data(), likelihood);
-  };
   std::vector<double> h(n);
   for (std::size_t i = 0; i < n; ++i) h[i] = 1e-2 * step[i];
+  // On the last pass the diagonal's points u +/- h_i also give each run's score by central
+  // differences, for the sandwich: the runs' terms there are summed for H and differenced for J.
   Eigen::MatrixXd H(n, n);
+  std::vector<std::vector<double>> scores(n);
   for (int pass = 0; pass < 2; ++pass) {
     for (std::size_t i = 0; i < n; ++i) {
       for (std::size_t j = i; j < n; ++j) {
-        auto at = [&](double si, double sj) {
+        auto terms = [&](double si, double sj) {
           std::vector<double> x = u;
           x[i] += si * h[i];
           x[j] += sj * h[j];
-          return f(x);
+          return run_terms(suite, model, handles, x.data(), likelihood);
         };
-        H(i, j) = i == j ? (at(1, 0) - 2 * best + at(-1, 0)) / (h[i] * h[i])
-                         : (at(1, 1) - at(1, -1) - at(-1, 1) + at(-1, -1)) / (4 * h[i] * h[j]);
-        H(j, i) = H(i, j);
+        auto at = [&](double si, double sj) { return negative_sum(terms(si, sj)); };
+        if (i == j) {
+          const std::vector<double> up = terms(1, 0), down = terms(-1, 0);
+          H(i, i) = (negative_sum(up) - 2 * best + negative_sum(down)) / (h[i] * h[i]);
+          scores[i].resize(up.size());
+          for (std::size_t r = 0; r < up.size(); ++r) scores[i][r] = (up[r] - down[r]) / (2 * h[i]);
+        } else {
+          H(i, j) = (at(1, 1) - at(1, -1) - at(-1, 1) + at(-1, -1)) / (4 * h[i] * h[j]);
+          H(j, i) = H(i, j);
+        }
       }
     }
     if (pass == 0) {
@@ -246,23 +259,11 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
       }
     }
   }
-  // The runs' scores by central differences with the same steps, for the sandwich.
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
-  {
-    std::vector<std::vector<double>> scores(n);
+  for (std::size_t r = 0; r < scores[0].size(); ++r) {
     for (std::size_t i = 0; i < n; ++i) {
-      std::vector<double> up = u, down = u;
-      up[i] += h[i];
-      down[i] -= h[i];
-      const std::vector<double> a = run_terms(suite, model, handles, up, likelihood);
-      const std::vector<double> b = run_terms(suite, model, handles, down, likelihood);
-      for (std::size_t r = 0; r < a.size(); ++r) scores[i].push_back((a[r] - b[r]) / (2 * h[i]));
-    }
-    for (std::size_t r = 0; r < scores[0].size(); ++r) {
-      for (std::size_t i = 0; i < n; ++i) {
-        for (std::size_t j = 0; j < n; ++j) {
-          J(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) += scores[i][r] * scores[j][r];
-        }
+      for (std::size_t j = 0; j < n; ++j) {
+        J(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) += scores[i][r] * scores[j][r];
       }
     }
   }

@@ -31,9 +31,9 @@ ModelSummary summarise(const Comparison& c) {
   return s;
 }
 
-std::vector<double> experiment_log_likelihoods(const Suite& suite, const SuiteModel& model) {
+std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<RunResidual>>& res) {
   std::vector<double> out;
-  for (const auto& ex : residuals(suite, model)) out.push_back(log_likelihood({ex}));
+  for (const auto& ex : res) out.push_back(log_likelihood({ex}));
   return out;
 }
 
@@ -152,7 +152,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   const auto base_residuals = residuals(suite, base);
   const double base_full = log_likelihood(base_residuals);
   const double base_scatter = scatter_log_likelihood(base_residuals);
-  const std::vector<double> base_by_experiment = experiment_log_likelihoods(suite, base);
+  const std::vector<double> base_by_experiment = experiment_log_likelihoods(base_residuals);
 
   std::vector<std::string> names;
   for (const EffectInfo& info : effect_catalogue()) {
@@ -186,7 +186,6 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     // Each candidate is judged on the part of the likelihood it explains: the full one for a
     // systematic effect, the scatter part for a random one (whose extra variance would
     // otherwise also "explain" any mean misfit). The gains are on one scale; delta BIC ranks.
-    c.delta_full_log_likelihood = log_likelihood(residuals(suite, c.model)) - base_full;
     c.delta_log_likelihood = f.log_likelihood_after - (c.systematic ? base_full : base_scatter);
     c.delta_bic = -2.0 * c.delta_log_likelihood + c.dof * log_runs;
     double lr = 2.0 * c.delta_log_likelihood;
@@ -228,7 +227,9 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
         c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
       }
     }
-    const std::vector<double> by_experiment = experiment_log_likelihoods(suite, c.model);
+    const auto candidate_residuals = residuals(suite, c.model);
+    c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - base_full;
+    const std::vector<double> by_experiment = experiment_log_likelihoods(candidate_residuals);
     std::vector<std::pair<std::string, double>> gains;
     for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
       gains.push_back({suite.experiments[e].name, by_experiment[e] - base_by_experiment[e]});

@@ -84,6 +84,18 @@ SuiteRun load_log(const std::string& log_file, double wheelbase_m) {
 
 }  // namespace
 
+MeasurementNoise parse_measurement_noise(const YAML::Node& node, const std::string& file,
+                                         const std::string& key) {
+  const Where where{file, key};
+  yaml::require_map(where, node, {"xy", "theta_deg"});
+  MeasurementNoise m;
+  m.xy_m = yaml::optional_number(where, node, "xy").value_or(0.0);
+  m.theta_rad = yaml::optional_number(where, node, "theta_deg").value_or(0.0) * kDegToRad;
+  if (m.xy_m < 0) yaml::fail(where.child("xy"), node["xy"], "must be >= 0");
+  if (m.theta_rad < 0) yaml::fail(where.child("theta_deg"), node["theta_deg"], "must be >= 0");
+  return m;
+}
+
 Matrix3 MeasurementNoise::covariance() const {
   return Vector3(xy_m * xy_m, xy_m * xy_m, theta_rad * theta_rad).asDiagonal();
 }
@@ -119,15 +131,7 @@ Suite load_suite(const std::string& file) {
                             : std::filesystem::path(file).stem().string();
   suite.robot = parse_robot(yaml::require(where, root, "robot"), file, "robot");
   if (const YAML::Node noise = root["measurement_noise"]) {
-    const Where nw = where.child("measurement_noise");
-    yaml::require_map(nw, noise, {"xy", "theta_deg"});
-    suite.measurement_noise.xy_m = yaml::optional_number(nw, noise, "xy").value_or(0.0);
-    suite.measurement_noise.theta_rad =
-        yaml::optional_number(nw, noise, "theta_deg").value_or(0.0) * kDegToRad;
-    if (suite.measurement_noise.xy_m < 0) yaml::fail(nw.child("xy"), noise["xy"], "must be >= 0");
-    if (suite.measurement_noise.theta_rad < 0) {
-      yaml::fail(nw.child("theta_deg"), noise["theta_deg"], "must be >= 0");
-    }
+    suite.measurement_noise = parse_measurement_noise(noise, file, "measurement_noise");
   }
   if (const YAML::Node model = root["model"]) {
     yaml::require_map(where.child("model"), model, {"effects"});

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "odomcov/format.hpp"
 #include "random.hpp"
 #include "yaml_util.hpp"
 
@@ -108,7 +109,7 @@ Config SweepPlan::point_config(std::size_t i) const {
   auto describe = [&] {
     std::string text = "point " + std::to_string(i) + " (";
     for (std::size_t a = 0; a < axes.size(); ++a) {
-      text += (a ? ", " : "") + axes[a].name + " = " + yaml::format_number(values[a]);
+      text += (a ? ", " : "") + axes[a].name + " = " + format_number(values[a]);
     }
     return text + ")";
   };

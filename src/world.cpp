@@ -3,11 +3,11 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <regex>
 #include <set>
 
+#include "odomcov/format.hpp"
 #include "odomcov/simulator.hpp"
 #include "random.hpp"
 #include "yaml_util.hpp"
@@ -17,12 +17,6 @@ namespace {
 
 using yaml::Where;
 constexpr double kDegToRad = M_PI / 180.0;
-
-std::string full_precision(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
-}
 
 }  // namespace
 
@@ -39,15 +33,7 @@ WorldFile load_world(const std::string& file) {
   w.world.noise = w.robot.noise;
   if (root["world"]) w.world = parse_world(root["world"], file, "world", w.robot.noise);
   if (const YAML::Node noise = root["measurement_noise"]) {
-    const Where nw = where.child("measurement_noise");
-    yaml::require_map(nw, noise, {"xy", "theta_deg"});
-    w.measurement_noise.xy_m = yaml::optional_number(nw, noise, "xy").value_or(0.0);
-    w.measurement_noise.theta_rad =
-        yaml::optional_number(nw, noise, "theta_deg").value_or(0.0) * kDegToRad;
-    if (w.measurement_noise.xy_m < 0) yaml::fail(nw.child("xy"), noise["xy"], "must be >= 0");
-    if (w.measurement_noise.theta_rad < 0) {
-      yaml::fail(nw.child("theta_deg"), noise["theta_deg"], "must be >= 0");
-    }
+    w.measurement_noise = parse_measurement_noise(noise, file, "measurement_noise");
   }
   if (root["seed"]) w.seed = yaml::to_unsigned(where.child("seed"), root["seed"]);
   const Where ew = where.child("experiments");
@@ -125,8 +111,8 @@ std::string suite_yaml(const WorldFile& w) {
 std::string measurements_csv(const std::vector<Vector3>& measured) {
   std::string text = "run,x,y,theta\n";
   for (std::size_t r = 0; r < measured.size(); ++r) {
-    text += std::to_string(r + 1) + "," + full_precision(measured[r].x()) + "," +
-            full_precision(measured[r].y()) + "," + full_precision(measured[r].z()) + "\n";
+    text += std::to_string(r + 1) + "," + format_number(measured[r].x(), "%.17g") + "," +
+            format_number(measured[r].y(), "%.17g") + "," + format_number(measured[r].z(), "%.17g") + "\n";
   }
   return text;
 }

@@ -1,7 +1,6 @@
 #include "yaml_util.hpp"
 
 #include <cmath>
-#include <cstdio>
 #include <fstream>
 #include <limits>
 #include <sstream>
@@ -102,12 +101,6 @@ std::uint64_t to_unsigned(const Where& where, const YAML::Node& node) {
 std::string to_string(const Where& where, const YAML::Node& node) {
   if (!node.IsScalar()) fail(where, node, "expected a string");
   return node.Scalar();
-}
-
-std::string format_number(double value) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", value);
-  return buf;
 }
 
 double require_number(const Where& parent_where, const YAML::Node& parent, const char* key) {

@@ -46,9 +46,6 @@ std::int64_t to_integer(const Where& where, const YAML::Node& node, std::int64_t
 std::uint64_t to_unsigned(const Where& where, const YAML::Node& node);
 std::string to_string(const Where& where, const YAML::Node& node);
 
-/// A number as written in messages: shortest form that round-trips to 10 significant digits.
-std::string format_number(double value);
-
 double require_number(const Where& parent_where, const YAML::Node& parent, const char* key);
 std::optional<double> optional_number(const Where& parent_where, const YAML::Node& parent,
                                       const char* key);

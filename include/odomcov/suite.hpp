@@ -9,6 +9,10 @@
 #include "odomcov/path.hpp"
 #include "odomcov/statistics.hpp"
 
+namespace YAML {
+class Node;
+}
+
 namespace odomcov {
 
 /// Std-dev of the external reference (motion capture, sonar): x and y [m] and theta [rad].
@@ -17,6 +21,11 @@ struct MeasurementNoise {
   double theta_rad = 0.0;
   Matrix3 covariance() const;
 };
+
+/// Parses a `measurement_noise` block {xy [m], theta_deg}, both optional (0) and >= 0; `key`
+/// for messages. Suites and worlds share it.
+MeasurementNoise parse_measurement_noise(const YAML::Node& node, const std::string& file,
+                                         const std::string& key);
 
 struct SuiteRun {
   std::string id;                   // the CSV's run column, or the log file's name
