@@ -138,8 +138,11 @@ Config SweepPlan::point_config(std::size_t i) const {
                      describe() + ": " + e.key() + ": " + e.message());
   }
   config.simulation.seed = point_seed(i);
-  config.robot.noise.k_left *= noise_scale;
-  config.robot.noise.k_right *= noise_scale;
+  // The wheel noise itself scales: the simulated world's and the model's alike.
+  for (WheelNoise* noise : {&config.robot.noise, &config.world.noise}) {
+    noise->k_left *= noise_scale;
+    noise->k_right *= noise_scale;
+  }
   if (path_scale != 1.0) {
     config.path = scale_path(config.path, path_scale);
     check_simulation_size(file, 0, "grid.path_scale", config.simulation.runs,

@@ -29,6 +29,9 @@ TEST(Sweep, PointsGetTheirValuesAndDistinctSeeds) {
     const std::vector<double> v = plan.point_values(i);
     EXPECT_DOUBLE_EQ(c.robot.noise.k_left, 1e-3 * v[0]);
     EXPECT_DOUBLE_EQ(c.robot.noise.k_right, 2e-3 * v[0]);
+    // noise_scale scales the wheel noise itself: the simulated world's as well as the model's.
+    EXPECT_DOUBLE_EQ(c.world.noise.k_left, 1e-3 * v[0]);
+    EXPECT_DOUBLE_EQ(c.world.noise.k_right, 2e-3 * v[0]);
     EXPECT_EQ(c.path.sample_rate_hz, v[1]);
     EXPECT_EQ(c.simulation.runs, 400);
     EXPECT_EQ(c.simulation.seed, plan.point_seed(i));
