@@ -158,7 +158,11 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effect_list) {
   const auto active = effects::instantiate(effect_list);
   int constants = 0;
-  for (const auto& e : active) constants += e->run_constants();
+  double scale_left = 1.0, scale_right = 1.0, wheelbase_factor = 1.0;
+  for (const auto& e : active) {
+    constants += e->run_constants();
+    e->systematic(scale_left, scale_right, wheelbase_factor);
+  }
   const double B = robot.wheelbase_m;
 
   Prediction out;
@@ -172,6 +176,9 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
     m.encoder = encoder;
     m.wheelbase_m = B;
     m.noise = robot.noise;
+    m.scale_left = scale_left;
+    m.scale_right = scale_right;
+    m.wheelbase_factor = wheelbase_factor;
     m.wheel_cov.diagonal() << robot.noise.k_left * robot.noise.k_left * std::abs(encoder.left_m),
         robot.noise.k_right * robot.noise.k_right * std::abs(encoder.right_m);
     for (const auto& e : active) e->model(m);

@@ -60,15 +60,17 @@ struct WorldSample {
   double extra_right = 0.0;
 };
 
-/// One constant-curvature piece on the model side. The engine fills the inputs and the plain
-/// robot's values; each effect changes what it models.
+/// One constant-curvature piece on the model side. The engine fills the inputs, the plain
+/// robot's values and the systematic factors (every effect's `systematic`, folded in first as on
+/// the world side, so no effect's model depends on the order effects are listed); each effect's
+/// `model` then adds what it models.
 struct PieceModel {
   ArcSegment encoder;        // input: encoder travel over the piece
   double wheelbase_m = 0.0;  // input: nominal wheelbase
   WheelNoise noise;          // input: the model's wheel noise constants
-  double scale_left = 1.0;   // systematic: true travel = scale x encoder travel
+  double scale_left = 1.0;   // input, systematic: true travel = scale x encoder travel
   double scale_right = 1.0;
-  double wheelbase_factor = 1.0;  // systematic: true wheelbase = factor x nominal
+  double wheelbase_factor = 1.0;  // input, systematic: true wheelbase = factor x nominal
   Eigen::Matrix2d wheel_cov = Eigen::Matrix2d::Zero();  // white (e_L, e_R) over the piece
   double heading_var = 0.0;  // extra white heading variance over the piece
   /// One column per standard-normal per-run constant: its effect on (e_L, e_R) over the piece.
@@ -96,7 +98,8 @@ class Effect {
   // ---- Model side (first order in the effect) ------------------------------------------------
   /// Number of standard-normal per-run constants this effect contributes columns for.
   virtual int run_constants() const { return 0; }
-  virtual void model(PieceModel& piece) const = 0;
+  /// The effect's random part on one piece (systematic factors are already in `piece`).
+  virtual void model(PieceModel& piece) const { (void)piece; }
 };
 
 /// A catalogue entry: the public description plus the factory.

@@ -12,10 +12,6 @@ class ScaleError final : public Effect {
     scale_left *= es_;
     scale_right *= es_;
   }
-  void model(PieceModel& piece) const override {
-    piece.scale_left *= es_;
-    piece.scale_right *= es_;
-  }
 
  private:
   double es_;

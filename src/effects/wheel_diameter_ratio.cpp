@@ -14,10 +14,6 @@ class WheelDiameterRatio final : public Effect {
     scale_left *= left_;
     scale_right *= right_;
   }
-  void model(PieceModel& piece) const override {
-    piece.scale_left *= left_;
-    piece.scale_right *= right_;
-  }
 
  private:
   double left_, right_;

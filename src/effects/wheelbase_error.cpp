@@ -11,7 +11,6 @@ class WheelbaseError final : public Effect {
   void systematic(double&, double&, double& wheelbase_factor) const override {
     wheelbase_factor *= eb_;
   }
-  void model(PieceModel& piece) const override { piece.wheelbase_factor *= eb_; }
 
  private:
   double eb_;
