@@ -7,6 +7,7 @@
 #include <nlopt.hpp>
 
 #include "odomcov/error.hpp"
+#include "odomcov/format.hpp"
 #include "odomcov/propagation.hpp"
 
 namespace odomcov {
@@ -286,7 +287,7 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
       const double se_u = std::sqrt(cov_u(k, k));
       const bool at_bound = (u[i] - lower[i] < 0.5 * se_u) || (upper[i] - u[i] < 0.5 * se_u);
       if (at_bound) {
-        out.warnings.push_back(names[i] + " is at its bound (" + std::to_string(out.values(k)) +
+        out.warnings.push_back(names[i] + " is at its bound (" + format_number(out.values(k)) +
                                "): the data do not determine it; no standard error");
       } else {
         out.stderrs(k) = std::sqrt(out.covariance(k, k));
@@ -380,14 +381,16 @@ Eigen::Vector2d centre_of_gravity(const SquareRuns& runs, double c_left, double 
 UmbmarkResult umbmark(const Suite& suite, const std::string& cw, const std::string& ccw,
                       std::optional<double> side_m) {
   const double b = suite.robot.wheelbase_m;
-  const SquareRuns runs_cw = square_runs(experiments_named(suite, cw, "--cw"), b);
-  const SquareRuns runs_ccw = square_runs(experiments_named(suite, ccw, "--ccw"), b);
+  const std::vector<const SuiteExperiment*> squares_cw = experiments_named(suite, cw, "--cw");
+  const std::vector<const SuiteExperiment*> squares_ccw = experiments_named(suite, ccw, "--ccw");
+  const SquareRuns runs_cw = square_runs(squares_cw, b);
+  const SquareRuns runs_ccw = square_runs(squares_ccw, b);
   if (runs_cw.turned > -M_PI) {
-    throw InputError(suite.file, 0, "--cw", "these runs turn " + std::to_string(runs_cw.turned) +
+    throw InputError(suite.file, 0, "--cw", "these runs turn " + format_number(runs_cw.turned, "%.3f") +
                                                 " rad in all; a clockwise square turns about -2 pi");
   }
   if (runs_ccw.turned < M_PI) {
-    throw InputError(suite.file, 0, "--ccw", "these runs turn " + std::to_string(runs_ccw.turned) +
+    throw InputError(suite.file, 0, "--ccw", "these runs turn " + format_number(runs_ccw.turned, "%.3f") +
                                                  " rad in all; a counter-clockwise square turns about +2 pi");
   }
   UmbmarkResult r;
@@ -416,16 +419,24 @@ UmbmarkResult umbmark(const Suite& suite, const std::string& cw, const std::stri
   r.cg_cw_after = centre_of_gravity(runs_cw, r.c_left, r.c_right, r.wheelbase_corrected);
   r.cg_ccw_after = centre_of_gravity(runs_ccw, r.c_left, r.c_right, r.wheelbase_corrected);
   r.emax_after = std::max(r.cg_cw_after.norm(), r.cg_ccw_after.norm());
-  return r;
-}
 
-double umbmark_emax(const Suite& suite, const std::string& cw, const std::string& ccw,
-                    double c_left, double c_right, double wheelbase_m) {
-  const double b = suite.robot.wheelbase_m;
-  const SquareRuns runs_cw = square_runs(experiments_named(suite, cw, "--cw"), b);
-  const SquareRuns runs_ccw = square_runs(experiments_named(suite, ccw, "--ccw"), b);
-  return std::max(centre_of_gravity(runs_cw, c_left, c_right, wheelbase_m).norm(),
-                  centre_of_gravity(runs_ccw, c_left, c_right, wheelbase_m).norm());
+  // The cross-check: Ed and Eb by maximum likelihood on the same runs with the full model (no
+  // small angles, no turns on the spot), and the Emax,sys its corrections leave.
+  Suite squares = suite;
+  squares.experiments.clear();
+  for (const auto* list : {&squares_cw, &squares_ccw}) {
+    for (const SuiteExperiment* e : *list) squares.experiments.push_back(*e);
+  }
+  const FitResult ml = fit(squares, suite_model(squares),
+                           {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"});
+  r.ml_Ed = ml.values(0);
+  r.ml_Eb = ml.values(1);
+  r.ml_Ed_stderr = ml.stderrs(0);
+  r.ml_Eb_stderr = ml.stderrs(1);
+  const double ml_left = 2 / (r.ml_Ed + 1), ml_right = 2 / (1 / r.ml_Ed + 1);
+  r.ml_emax_after = std::max(centre_of_gravity(runs_cw, ml_left, ml_right, r.ml_Eb * b).norm(),
+                             centre_of_gravity(runs_ccw, ml_left, ml_right, r.ml_Eb * b).norm());
+  return r;
 }
 
 }  // namespace odomcov

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "odomcov/format.hpp"
 #include "yaml_util.hpp"
 
 namespace odomcov {
@@ -11,7 +12,6 @@ namespace {
 using yaml::Where;
 
 constexpr double kDefaultSpeedMps = 0.5;
-constexpr double kDegToRad = M_PI / 180.0;
 
 std::vector<Keyframe> parse_keyframes(const Where& where, const YAML::Node& node) {
   yaml::require_sequence(where, node);
@@ -29,7 +29,7 @@ std::vector<Keyframe> parse_keyframes(const Where& where, const YAML::Node& node
     }
     if (i > 0 && !(k.t_s > keyframes.back().t_s)) {
       yaml::fail(row_where, row, "time must increase strictly (previous " +
-                                     std::to_string(keyframes.back().t_s) + " s)");
+                                     format_number(keyframes.back().t_s) + " s)");
     }
     keyframes.push_back(k);
   }
@@ -184,7 +184,7 @@ Path parse_path(const YAML::Node& node, const std::string& file, const std::stri
   const double samples = std::ceil(path.duration_s() * path.sample_rate_hz);
   if (samples > static_cast<double>(kMaxSamplesPerRun)) {
     yaml::fail(where.child("sample_rate"), node["sample_rate"],
-               "path needs " + std::to_string(samples) + " samples, more than the limit " +
+               "path needs " + format_number(samples, "%.0f") + " samples, more than the limit " +
                    std::to_string(kMaxSamplesPerRun));
   }
   return path;

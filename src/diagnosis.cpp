@@ -53,20 +53,29 @@ std::vector<std::string> fitted_names(const std::string& effect) {
   return names;
 }
 
+/// The fitted parameters of a model's effects, split into systematic and random ones.
+struct FittedNames {
+  std::vector<std::string> systematic, random;
+};
+FittedNames split_fitted_names(const EffectList& effects) {
+  FittedNames out;
+  for (const EffectSpec& e : effects) {
+    for (const std::string& n : fitted_names(e.name)) {
+      (systematic(e.name) ? out.systematic : out.random).push_back(n);
+    }
+  }
+  return out;
+}
+
 /// Refits every effect of a model by the part of the likelihood it explains, as a block
 /// coordinate step: the systematic effects on the full likelihood (random ones held), then the
 /// random effects on the scatter part (systematic ones held). A random effect is thus never
 /// sized by a mean misfit, and a systematic one always sees the spread the random ones give.
 SuiteModel refit(const Suite& suite, const SuiteModel& model) {
-  std::vector<std::string> systematic_names, random_names;
-  for (const EffectSpec& e : model.effects) {
-    for (const std::string& n : fitted_names(e.name)) {
-      (systematic(e.name) ? systematic_names : random_names).push_back(n);
-    }
-  }
+  const FittedNames names = split_fitted_names(model.effects);
   SuiteModel out = model;
-  if (!systematic_names.empty()) out = fit(suite, out, systematic_names, Likelihood::full).model;
-  if (!random_names.empty()) out = fit(suite, out, random_names, Likelihood::scatter).model;
+  if (!names.systematic.empty()) out = fit(suite, out, names.systematic, Likelihood::full).model;
+  if (!names.random.empty()) out = fit(suite, out, names.random, Likelihood::scatter).model;
   return out;
 }
 
@@ -142,12 +151,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   // The model's own effects, refitted: the reference every candidate must improve on. Each
   // candidate refits the model's effects of its own kind with it (systematic ones on the full
   // likelihood, random ones on the scatter part); the others stay at their refitted values.
-  std::vector<std::string> nuisance_systematic, nuisance_random;
-  for (const EffectSpec& e : model.effects) {
-    for (const std::string& n : fitted_names(e.name)) {
-      (systematic(e.name) ? nuisance_systematic : nuisance_random).push_back(n);
-    }
-  }
+  const FittedNames nuisance = split_fitted_names(model.effects);
   const SuiteModel base = refit(suite, model);
   const auto base_residuals = residuals(suite, base);
   const double base_full = log_likelihood(base_residuals);
@@ -174,7 +178,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     Candidate c;
     c.effect = name;
     c.systematic = systematic(name);
-    std::vector<std::string> fitted = c.systematic ? nuisance_systematic : nuisance_random;
+    std::vector<std::string> fitted = c.systematic ? nuisance.systematic : nuisance.random;
     const std::vector<std::string> own = fitted_names(name);
     fitted.insert(fitted.end(), own.begin(), own.end());
     const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;

@@ -153,10 +153,9 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
                      "# Ticks to metres: pi D / (" + format_number(metas[0].gear) + " x " +
                      format_number(metas[0].resolution) + "), no quadrature factor.\n";
   yaml += "name: " + options.name + "\n";
-  yaml += "robot: {wheelbase: " + format_number(wheelbase) + ", k_left: " + format_number(options.k) +
-          ", k_right: " + format_number(options.k) + "}\n";
+  yaml += robot_yaml(Robot{wheelbase, {options.k, options.k}}) + "\n";
   yaml += "measurement_noise: {xy: " + format_number(options.measurement_noise.xy_m) +
-          ", theta_deg: " + format_number(options.measurement_noise.theta_rad * 180.0 / M_PI) + "}\n";
+          ", theta_deg: " + format_number(options.measurement_noise.theta_rad / kDegToRad) + "}\n";
   yaml += "experiments:\n";
   for (const auto& [name, logs] : experiments) {
     yaml += "  - name: " + name + "\n    logs:\n";

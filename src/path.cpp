@@ -58,6 +58,11 @@ double wrap_angle(double angle_rad) {
   return wrapped;
 }
 
+Vector3 pose_error(const Vector3& true_pose, const Vector3& odometry) {
+  return {true_pose.x() - odometry.x(), true_pose.y() - odometry.y(),
+          wrap_angle(true_pose.z() - odometry.z())};
+}
+
 Vector3 drive(const Vector3& start, const ArcSegment& segment, double wheelbase_m) {
   return compose(start,
                  arc_displacement(segment.center_m(), segment.heading_change_rad(wheelbase_m)));

@@ -210,8 +210,7 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
   }
   out.odometry_end_pose = odometry;
   out.true_end_pose = true_pose;
-  out.mean = {true_pose.x() - odometry.x(), true_pose.y() - odometry.y(),
-              wrap_angle(true_pose.z() - odometry.z())};
+  out.mean = pose_error(true_pose, odometry);
   out.noise_mean = {noise_mean.real(), noise_mean.imag(), 0.0};
   out.cov = tangential_to_world(P, true_pose.z());
   return out;

@@ -28,7 +28,6 @@ inline constexpr std::uint32_t kTagWheelRetry = 1;     // + wheel
 inline constexpr std::uint32_t kTagEffect = 0x10000;
 inline constexpr std::uint32_t kTagPerRun = 0x20000;
 inline constexpr std::uint32_t kTagMeasurement = 0x30000;
-inline constexpr std::uint32_t kMaxEffectSlots = 16;
 inline constexpr int kRetryShift = 24;
 inline constexpr std::uint32_t kMaxRetries = 255;
 

@@ -192,7 +192,7 @@ struct Simulator::Impl {
   Robot robot;
   std::vector<Leg> legs;           // the true motion: systematic effects folded in
   std::vector<std::unique_ptr<effects::Effect>> effects;
-  bool stochastic = false;         // some effect needs the general kernel
+  std::vector<std::uint32_t> random_effects;  // indices of the effects with per-run/sample hooks
   double wheelbase_true = 0.0;
   std::int64_t samples = 0;
   Vector3 odometry_pose = Vector3::Zero();
@@ -221,9 +221,9 @@ struct Simulator::Impl {
   Impl(const Robot& r, const Path& path, const EffectList& effect_list)
       : robot(r), effects(effects::instantiate(effect_list)) {
     double scale_left = 1.0, scale_right = 1.0, wheelbase_factor = 1.0;
-    for (const auto& e : effects) {
-      e->systematic(scale_left, scale_right, wheelbase_factor);
-      stochastic = stochastic || e->stochastic();
+    for (std::size_t e = 0; e < effects.size(); ++e) {
+      effects[e]->systematic(scale_left, scale_right, wheelbase_factor);
+      if (effects[e]->stochastic()) random_effects.push_back(static_cast<std::uint32_t>(e));
     }
     wheelbase_true = wheelbase_factor * robot.wheelbase_m;
     legs = make_legs(path, robot, scale_left, scale_right, wheelbase_true);
@@ -242,18 +242,21 @@ struct Simulator::Impl {
   }
 
   Vector3 error_of(double x, double y, double theta) const {
-    return {x - odometry_pose.x(), y - odometry_pose.y(), wrap_angle(theta - odometry_pose.z())};
+    return pose_error({x, y, theta}, odometry_pose);
   }
 
   /// The scalar kernel: the reference for the vectorised one and, with stochastic effects,
-  /// the general kernel. Effects see each sample after the wheel normals are drawn.
+  /// the general kernel. The stochastic effects see each sample after the wheel normals are
+  /// drawn; each draws from its own slot, its index in the effect list.
   Vector3 scalar_run(const random::Philox::key_type& key, std::uint64_t run) const {
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
+    const bool stochastic = !random_effects.empty();
     std::vector<effects::Draws> draws;
-    std::vector<effects::RunState> states(effects.size());
-    for (std::size_t e = 0; e < effects.size(); ++e) {
-      draws.emplace_back(key, run, static_cast<std::uint32_t>(e));
-      effects[e]->begin_run(states[e], draws[e]);
+    std::vector<effects::RunState> states(random_effects.size());
+    draws.reserve(random_effects.size());
+    for (std::size_t i = 0; i < random_effects.size(); ++i) {
+      draws.emplace_back(key, run, random_effects[i]);
+      effects[random_effects[i]]->begin_run(states[i], draws[i]);
     }
     std::uint32_t n = 0;
     for (const Leg& leg : legs) {
@@ -263,7 +266,7 @@ struct Simulator::Impl {
         double zr = random::normal(b.hi, key, run, n, random::kTagWheelRetry + 1);
         double noise_l, noise_r;
         if (stochastic) {
-          for (const auto& e : effects) e->shape_noise(zl, zr);
+          for (std::uint32_t e : random_effects) effects[e]->shape_noise(zl, zr);
           effects::WorldSample ws;
           ws.index = n;
           ws.encoder_left = leg.encoder.left_m;
@@ -272,8 +275,8 @@ struct Simulator::Impl {
           ws.travel_left = leg.travel.left_m;
           ws.travel_right = leg.travel.right_m;
           ws.wheelbase = wheelbase_true;
-          for (std::size_t e = 0; e < effects.size(); ++e) {
-            effects[e]->perturb(ws, states[e], draws[e]);
+          for (std::size_t r = 0; r < random_effects.size(); ++r) {
+            effects[random_effects[r]]->perturb(ws, states[r], draws[r]);
           }
           noise_l = leg.sigma_left * zl + ws.extra_left;
           noise_r = leg.sigma_right * zr + ws.extra_right;
@@ -290,7 +293,7 @@ struct Simulator::Impl {
 
   /// Runs first .. first+kLanes-1: vectorised, or the general kernel run by run.
   void group(const random::Philox::key_type& key, std::uint64_t first, Vector3* out) const {
-    if (!stochastic) return vector_group(key, first, out);
+    if (random_effects.empty()) return vector_group(key, first, out);
     for (int j = 0; j < kLanes; ++j) out[j] = scalar_run(key, first + static_cast<std::uint64_t>(j));
   }
 

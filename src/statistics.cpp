@@ -66,6 +66,17 @@ SampleMoments moments(const std::vector<Vector3>& samples) {
   return moments(acc);
 }
 
+Matrix3 std_corr_matrix(const Matrix3& cov) {
+  Matrix3 out;
+  const Vector3 sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      out(i, j) = i == j ? sd(i) : (sd(i) > 0 && sd(j) > 0 ? cov(i, j) / (sd(i) * sd(j)) : 0.0);
+    }
+  }
+  return out;
+}
+
 double chi2_sf(double x, double dof) {
   if (!(x > 0.0)) return 1.0;
   if (std::isinf(x)) return 0.0;

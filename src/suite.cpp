@@ -24,7 +24,6 @@ namespace {
 
 using yaml::Where;
 
-constexpr double kDegToRad = M_PI / 180.0;
 
 std::vector<SuiteRun> load_measurements(const std::string& csv_file, const Vector3& odometry) {
   const csv::Table table = csv::read(csv_file, {"run", "x", "y", "theta"});
@@ -39,7 +38,6 @@ std::vector<SuiteRun> load_measurements(const std::string& csv_file, const Vecto
     }
     run.measured = {row.number(1), row.number(2), row.number(3)};
     run.odometry = odometry;
-    run.source = csv_file + ":" + std::to_string(row.line);
     runs.push_back(std::move(run));
   }
   return runs;
@@ -49,7 +47,6 @@ SuiteRun load_log(const std::string& log_file, double wheelbase_m) {
   const csv::Table table = csv::read(log_file, {"t", "left", "right", "x", "y", "theta"});
   SuiteRun run;
   run.id = std::filesystem::path(log_file).stem().string();
-  run.source = log_file;
   Vector3 odometry = Vector3::Zero();
   double t = 0, left = 0, right = 0;
   int reference_line = 0;
@@ -78,7 +75,6 @@ SuiteRun load_log(const std::string& log_file, double wheelbase_m) {
     csv::fail(log_file, table.rows.back().line, "x,y,theta", "the log has no reference pose");
   }
   run.pieces.resize(reference_pieces);  // the model covers the path up to the last reference
-  run.source = log_file + ":" + std::to_string(reference_line);
   return run;
 }
 
@@ -100,10 +96,7 @@ Matrix3 MeasurementNoise::covariance() const {
   return Vector3(xy_m * xy_m, xy_m * xy_m, theta_rad * theta_rad).asDiagonal();
 }
 
-Vector3 SuiteRun::error() const {
-  return {measured.x() - odometry.x(), measured.y() - odometry.y(),
-          wrap_angle(measured.z() - odometry.z())};
-}
+Vector3 SuiteRun::error() const { return pose_error(measured, odometry); }
 
 Vector3 sampled_end_pose(const Path& path, double wheelbase_m) {
   Vector3 pose = Vector3::Zero();
@@ -113,11 +106,6 @@ Vector3 sampled_end_pose(const Path& path, double wheelbase_m) {
     pose = drive(pose, {n * run.increment.left_m, n * run.increment.right_m}, wheelbase_m);
   }
   return pose;
-}
-
-std::vector<ArcSegment> run_pieces(const SuiteExperiment& experiment, const SuiteRun& run,
-                                   double wheelbase_m) {
-  return experiment.logged ? run.pieces : model_pieces(experiment.path, wheelbase_m);
 }
 
 Suite load_suite(const std::string& file) {
@@ -205,12 +193,6 @@ double chi2_two_sided(double x, double dof) {
   return std::min(1.0, 2.0 * std::min(lower, 1.0 - lower));
 }
 
-/// Model error of a path experiment's runs at the model's wheelbase.
-Vector3 error_against(const Vector3& measured, const Vector3& odometry) {
-  return {measured.x() - odometry.x(), measured.y() - odometry.y(),
-          wrap_angle(measured.z() - odometry.z())};
-}
-
 ExperimentComparison compare_experiment(const SuiteExperiment& ex,
                                         const std::vector<RunResidual>& res, double alpha_test,
                                         std::vector<Vector3>& whitened) {
@@ -236,6 +218,7 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
     predicted_means.add(r.mean);
   }
   c.measured = moments(errors);
+  c.errors = std::move(errors);
   c.predicted_mean = predicted_means.mean();
   c.predicted_cov = mean_cov + predicted_means.scatter() / n;
 
@@ -354,14 +337,14 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
                                    ? ex.runs.front().odometry
                                    : sampled_end_pose(ex.path, B);
       for (std::size_t r = 0; r < ex.runs.size(); ++r) {
-        out[e][r] = {error_against(ex.runs[r].measured, odometry), p.mean + p.noise_mean,
+        out[e][r] = {pose_error(ex.runs[r].measured, odometry), p.mean + p.noise_mean,
                      p.cov + meas};
       }
       continue;
     }
     tbb::parallel_for(std::size_t{0}, ex.runs.size(), [&](std::size_t r) {
       const Prediction p = predict(ex.runs[r].pieces, model.robot, model.effects);
-      out[e][r] = {error_against(ex.runs[r].measured, p.odometry_end_pose), p.mean + p.noise_mean,
+      out[e][r] = {pose_error(ex.runs[r].measured, p.odometry_end_pose), p.mean + p.noise_mean,
                    p.cov + meas};
     });
   }

@@ -175,9 +175,9 @@ SweepPlan load_sweep(const std::string& file) {
     if (entry.second.size() == 0) yaml::fail(axis_where, entry.second, "needs at least one value");
     for (std::size_t i = 0; i < entry.second.size(); ++i) {
       const double v = yaml::to_number(axis_where.index(i), entry.second[i]);
-      if ((axis.name == "noise_scale" && v < 0.0) || (axis.name == "path_scale" && v <= 0.0)) {
-        yaml::fail(axis_where.index(i), entry.second[i],
-                   axis.name == "noise_scale" ? "must be >= 0" : "must be > 0");
+      // A scale of 0 leaves no noise (or no path): nothing to test, and 0/0 metrics.
+      if ((axis.name == "noise_scale" || axis.name == "path_scale") && !(v > 0.0)) {
+        yaml::fail(axis_where.index(i), entry.second[i], "must be > 0");
       }
       axis.values.push_back(v);
     }
@@ -209,16 +209,14 @@ Path scale_path(const Path& path, double scale) {
 
 SweepMetrics sweep_metrics(const Validation& v) {
   SweepMetrics m;
-  const Vector3 sim_std = v.simulation.cov.diagonal().cwiseMax(0.0).cwiseSqrt();
-  const Vector3 theory_std = v.theory_cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  const Matrix3 sim = std_corr_matrix(v.simulation.cov);
+  const Matrix3 theory = std_corr_matrix(v.theory_cov);
   const double n = static_cast<double>(v.simulation.n);
   for (int i = 0; i < 3; ++i) {
-    m.std_rel_err(i) = sim_std(i) / theory_std(i) - 1.0;
-    m.bias_se(i) = (v.simulation.mean(i) - v.theory_mean(i)) / (sim_std(i) / std::sqrt(n));
+    m.std_rel_err(i) = sim(i, i) / theory(i, i) - 1.0;
+    m.bias_se(i) = (v.simulation.mean(i) - v.theory_mean(i)) / (sim(i, i) / std::sqrt(n));
     for (int j = i + 1; j < 3; ++j) {
-      const double sim_corr = v.simulation.cov(i, j) / (sim_std(i) * sim_std(j));
-      const double theory_corr = v.theory_cov(i, j) / (theory_std(i) * theory_std(j));
-      m.max_corr_diff = std::max(m.max_corr_diff, std::abs(sim_corr - theory_corr));
+      m.max_corr_diff = std::max(m.max_corr_diff, std::abs(sim(i, j) - theory(i, j)));
     }
   }
   m.p_mean = v.mean_test.p_value;

@@ -16,7 +16,6 @@ namespace odomcov {
 namespace {
 
 using yaml::Where;
-constexpr double kDegToRad = M_PI / 180.0;
 
 }  // namespace
 

@@ -60,6 +60,10 @@ struct UmbmarkResult {
   double wheelbase_corrected = 0.0;
   double emax_before = 0.0, emax_after = 0.0;
   std::int64_t runs_cw = 0, runs_ccw = 0;
+  // The maximum-likelihood cross-check on the same runs (fit of Ed and Eb, full model) and the
+  // Emax,sys left after re-integrating with its corrections.
+  double ml_Ed = 1.0, ml_Eb = 1.0, ml_Ed_stderr = 0.0, ml_Eb_stderr = 0.0;
+  double ml_emax_after = 0.0;
 };
 
 /// UMBmark from the CW and CCW square runs (each a comma-separated list of experiment names):
@@ -70,13 +74,10 @@ struct UmbmarkResult {
 /// Errors are true - odometry in the start frame (x along the initial heading, y to its left),
 /// the convention of [Borenstein96]. "After" re-integrates each run's encoder travel with the
 /// corrections. The side L is the planned paths' line length unless given; logged runs must
-/// give it (their turns need not be on the spot, so the travel does not tell it).
+/// give it (their turns need not be on the spot, so the travel does not tell it). The result
+/// includes the maximum-likelihood cross-check.
 UmbmarkResult umbmark(const Suite& suite, const std::string& cw, const std::string& ccw,
                       std::optional<double> side_m);
 
-/// Emax,sys of the same square runs with the odometry re-integrated at corrections
-/// (c_L, c_R, b), e.g. those of a maximum-likelihood fit of Ed and Eb.
-double umbmark_emax(const Suite& suite, const std::string& cw, const std::string& ccw,
-                    double c_left, double c_right, double wheelbase_m);
 
 }  // namespace odomcov

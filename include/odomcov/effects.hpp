@@ -56,7 +56,4 @@ std::string check_effect(const EffectSpec& spec);
 /// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}".
 std::string effect_yaml(const EffectSpec& spec);
 
-/// True when the effect needs per-sample or per-run randomness in the simulator.
-bool effects_are_stochastic(const EffectList& effects);
-
 }  // namespace odomcov

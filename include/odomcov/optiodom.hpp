@@ -16,7 +16,7 @@ struct OptiOdomOptions {
   std::optional<double> wheelbase_m;  // nominal robot; default: the sessions' metadata Li
   std::optional<std::pair<double, double>> diameters_m;  // (left, right); default: metadata Di
   double k = 1e-3;  // nominal wheel noise for the suite's robot (to be fitted)
-  MeasurementNoise measurement_noise{0.001, 0.1 * M_PI / 180.0};  // OptiTrack, conservative
+  MeasurementNoise measurement_noise{0.001, 0.1 * kDegToRad};  // OptiTrack, conservative
   std::string name = "optiodom";
 };
 

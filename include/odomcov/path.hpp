@@ -2,6 +2,7 @@
 // exact constant-curvature pose update, and the sampling schedule the simulator follows.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -55,8 +56,15 @@ std::vector<Keyframe> keyframes_from_segments(const std::vector<PathSegment>& se
 /// SE(2) composition of poses (x, y, theta): world_T_b = world_T_a * a_T_b. theta is not wrapped.
 Vector3 compose(const Vector3& world_T_a, const Vector3& a_T_b);
 
+/// Degrees to radians, for the configs' *_deg keys.
+inline constexpr double kDegToRad = M_PI / 180.0;
+
 /// Angle wrapped to (-pi, pi].
 double wrap_angle(double angle_rad);
+
+/// The error of a pose against the odometry's as the SPEC defines it: true - odometry, with
+/// theta wrapped to (-pi, pi].
+Vector3 pose_error(const Vector3& true_pose, const Vector3& odometry);
 
 /// Pose after driving `segment` from `start` on the exact constant-curvature arc.
 Vector3 drive(const Vector3& start, const ArcSegment& segment, double wheelbase_m);

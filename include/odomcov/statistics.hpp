@@ -47,6 +47,10 @@ struct TestResult {
   bool valid = true;  // false when the reference covariance is singular or n is too small
 };
 
+/// Standard deviations on the diagonal, correlation coefficients off it ([Kleeman95] §7); a
+/// correlation with a zero standard deviation is 0.
+Matrix3 std_corr_matrix(const Matrix3& cov);
+
 /// Survival function of chi^2_dof (Boost.Math).
 double chi2_sf(double x, double dof);
 

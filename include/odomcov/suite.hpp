@@ -32,7 +32,6 @@ struct SuiteRun {
   Vector3 measured = Vector3::Zero();  // reference end pose, start frame
   Vector3 odometry = Vector3::Zero();  // odometry end pose (from the path or the run's log)
   std::vector<ArcSegment> pieces;   // logged runs: one piece per log row; else empty
-  std::string source;               // file (and line) the run came from, for messages
 
   /// The error as SPEC defines it: measured (true) - odometry, theta wrapped.
   Vector3 error() const;
@@ -110,12 +109,13 @@ struct ExperimentComparison {
   Vector3 predicted_mean = Vector3::Zero();  // for a run drawn from the experiment
   Matrix3 predicted_cov = Matrix3::Zero();   // (mixture over runs for logged experiments)
   TestResult mean_test;   // Hotelling's T^2 on whitened residuals (chi^2 when n <= 3)
-  TestResult cov_test;    // LRT of cov = I on whitened residuals (NEES test when n < 5)
+  TestResult cov_test;    // LRT of cov = I on whitened residuals (NEES test when n < 10)
   std::string cov_method;  // "lrt" or "nees"
   double nees_mean = 0.0;
   double outside_95 = 0.0;  // fraction of runs with NEES above the chi^2_3 95% point
   double log_likelihood = 0.0;
   std::string verdict;
+  std::vector<Vector3> errors;  // each run's error (measured - odometry), in order
   // Per component (x, y, theta), for the plain-words failures:
   Vector3 mean_t = Vector3::Zero();        // (measured - predicted mean)/standard error
   Vector3 mean_p = Vector3::Ones();        // Student-t p-values
@@ -145,9 +145,5 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha);
 /// The odometry end pose of a sampled path: the encoder samples integrated with the exact arc
 /// update at the nominal wheelbase, as the simulator integrates them.
 Vector3 sampled_end_pose(const Path& path, double wheelbase_m);
-
-/// The pieces the model propagates for a run: its log's increments, or the experiment's path.
-std::vector<ArcSegment> run_pieces(const SuiteExperiment& experiment, const SuiteRun& run,
-                                   double wheelbase_m);
 
 }  // namespace odomcov

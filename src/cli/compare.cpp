@@ -65,11 +65,9 @@ std::string comparison_text(const Suite& suite, const Comparison& c) {
 
 json comparison_json(const Suite& suite, const Comparison& c) {
   json experiments = json::array();
-  const auto res = residuals(suite, suite_model(suite));
-  for (std::size_t i = 0; i < c.experiments.size(); ++i) {
-    const ExperimentComparison& e = c.experiments[i];
+  for (const ExperimentComparison& e : c.experiments) {
     json errors = json::array();
-    for (const RunResidual& r : res[i]) errors.push_back(to_json(r.error));
+    for (const Vector3& error : e.errors) errors.push_back(to_json(error));
     json tests = {{"mean", test_json(e.mean_test)}, {"covariance", test_json(e.cov_test)}};
     tests["covariance"]["method"] = e.cov_method;
     experiments.push_back({{"name", e.name},
@@ -100,7 +98,7 @@ json comparison_json(const Suite& suite, const Comparison& c) {
 namespace {
 
 int run_compare(const CompareOptions& opt) {
-  if (!(opt.alpha > 0.0 && opt.alpha < 1.0)) throw UsageError("--alpha must be in (0, 1)");
+  check_alpha(opt.alpha);
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
   const Comparison c = compare(suite, suite_model(suite), opt.alpha);

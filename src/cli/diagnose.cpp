@@ -31,7 +31,7 @@ json values_json(const Candidate& c, const std::vector<double>& values) {
 }
 
 int run_diagnose(const DiagnoseOptions& opt) {
-  if (!(opt.alpha > 0.0 && opt.alpha < 1.0)) throw UsageError("--alpha must be in (0, 1)");
+  check_alpha(opt.alpha);
   for (const std::string& e : opt.effects) {
     if (e != kWheelNoiseLevel && !find_effect(e)) throw UsageError("--effects: unknown effect '" + e + "'");
   }

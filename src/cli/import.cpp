@@ -25,10 +25,8 @@ struct ImportOptions {
 
 int run_import(const ImportOptions& opt) {
   namespace fs = std::filesystem;
+  check_output_dir(opt.out);
   const fs::path dir(opt.out);
-  const fs::path parent = dir.has_parent_path() ? dir.parent_path() : fs::path(".");
-  if (!fs::is_directory(parent)) throw UsageError("--out: directory " + parent.string() + " does not exist");
-  if (fs::exists(dir) && !fs::is_directory(dir)) throw UsageError("--out: " + opt.out + " is not a directory");
   if (!opt.json.empty()) check_output_path(opt.json);
   if (opt.wheelbase && !(*opt.wheelbase > 0)) throw UsageError("--wheelbase must be > 0");
   if (!opt.diameters.empty() && (opt.diameters.size() != 2 || !(opt.diameters[0] > 0) || !(opt.diameters[1] > 0))) {
@@ -40,7 +38,7 @@ int run_import(const ImportOptions& opt) {
   o.wheelbase_m = opt.wheelbase;
   if (!opt.diameters.empty()) o.diameters_m = std::make_pair(opt.diameters[0], opt.diameters[1]);
   o.k = opt.k;
-  o.measurement_noise = {opt.xy, opt.theta_deg * M_PI / 180.0};
+  o.measurement_noise = {opt.xy, opt.theta_deg * kDegToRad};
   o.name = opt.name;
   std::vector<ImportSummary> summary;
   const std::vector<ImportedFile> files = import_optiodom(o, &summary);  // all read first

@@ -45,17 +45,6 @@ std::string matrix_rows(const Matrix3& m, const std::string& indent, int precisi
   return out.str();
 }
 
-Matrix3 std_corr_matrix(const Matrix3& cov) {
-  Matrix3 out;
-  const Vector3 sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      out(i, j) = i == j ? sd(i) : (sd(i) > 0 && sd(j) > 0 ? cov(i, j) / (sd(i) * sd(j)) : 0.0);
-    }
-  }
-  return out;
-}
-
 json moments_json(const Vector3& mean, const Matrix3& cov) {
   const Matrix3 sc = std_corr_matrix(cov);
   Matrix3 corr = sc;
@@ -95,6 +84,22 @@ void check_output_path(const std::string& path) {
   if (!fs::is_directory(dir)) throw UsageError(path + ": directory " + dir.string() + " does not exist");
   if (::access(dir.c_str(), W_OK) != 0) throw UsageError(path + ": directory is not writable");
   if (fs::is_directory(path)) throw UsageError(path + ": is a directory");
+}
+
+void check_output_dir(const std::string& dir) {
+  namespace fs = std::filesystem;
+  const fs::path path(dir);
+  const fs::path parent = path.has_parent_path() ? path.parent_path() : fs::path(".");
+  if (!fs::is_directory(parent)) throw UsageError("--out: directory " + parent.string() + " does not exist");
+  if (fs::exists(path) && !fs::is_directory(path)) throw UsageError("--out: " + dir + " is not a directory");
+}
+
+void check_alpha(double alpha) {
+  if (!(alpha > 0.0 && alpha < 1.0)) throw UsageError("--alpha must be in (0, 1)");
+}
+
+void check_threads(int threads) {
+  if (threads < 0) throw UsageError("--threads must be >= 0 (0 = all cores)");
 }
 
 void write_file_atomic(const std::string& path, const std::string& text) {

@@ -23,8 +23,6 @@ std::string fixed(double value, int precision);
 /// Rows of a 3x3 matrix, each prefixed with `indent`, columns right-aligned.
 std::string matrix_rows(const Matrix3& m, const std::string& indent, int precision = 4);
 
-/// Standard deviations on the diagonal, correlation coefficients off it ([Kleeman95] §7).
-Matrix3 std_corr_matrix(const Matrix3& cov);
 
 /// The {mean, cov, std, corr} block of ../shared/SPEC.md.
 json moments_json(const Vector3& mean, const Matrix3& cov);
@@ -40,6 +38,14 @@ std::string test_text(const TestResult& t);
 /// Fails with a usage error (exit 2) unless the output's directory exists and is writable;
 /// called before any work starts.
 void check_output_path(const std::string& path);
+
+/// The same for an output directory (`--out DIR` of synth and import): its parent must exist,
+/// and it must be a directory if it exists.
+void check_output_dir(const std::string& dir);
+
+/// Usage checks shared by the subcommands: --alpha in (0, 1), --threads >= 0.
+void check_alpha(double alpha);
+void check_threads(int threads);
 
 /// Writes `text` to `path` via a temporary file and rename.
 void write_file_atomic(const std::string& path, const std::string& text);

@@ -83,8 +83,8 @@ std::string report(const Config& config, const Validation& v, int threads) {
 
 int run_run(const RunOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
-  if (!(opt.alpha > 0.0 && opt.alpha < 1.0)) throw UsageError("--alpha must be in (0, 1)");
-  if (opt.threads < 0) throw UsageError("--threads must be >= 0 (0 = all cores)");
+  check_alpha(opt.alpha);
+  check_threads(opt.threads);
   if (opt.samples < 0 || opt.samples > kMaxJsonSamples) {
     throw UsageError("--samples must be in [0, " + std::to_string(kMaxJsonSamples) + "]");
   }

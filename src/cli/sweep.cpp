@@ -55,8 +55,8 @@ std::string csv_row(const SweepPlan& plan, std::size_t point, const Validation& 
 
 int run_sweep(const SweepOptions& opt) {
   const auto [shard, shards] = parse_shard(opt.shard);
-  if (!(opt.alpha > 0.0 && opt.alpha < 1.0)) throw UsageError("--alpha must be in (0, 1)");
-  if (opt.threads < 0) throw UsageError("--threads must be >= 0 (0 = all cores)");
+  check_alpha(opt.alpha);
+  check_threads(opt.threads);
   if (!opt.out.empty()) check_output_path(opt.out);
   if (!opt.json.empty()) check_output_path(opt.json);
   const SweepPlan plan = load_sweep(opt.sweep);  // validates every point

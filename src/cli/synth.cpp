@@ -21,11 +21,9 @@ struct SynthOptions {
 
 int run_synth(const SynthOptions& opt) {
   namespace fs = std::filesystem;
-  if (opt.threads < 0) throw UsageError("--threads must be >= 0 (0 = all cores)");
+  check_threads(opt.threads);
+  check_output_dir(opt.out);
   const fs::path dir(opt.out);
-  const fs::path parent = dir.has_parent_path() ? dir.parent_path() : fs::path(".");
-  if (!fs::is_directory(parent)) throw UsageError("--out: directory " + parent.string() + " does not exist");
-  if (fs::exists(dir) && !fs::is_directory(dir)) throw UsageError("--out: " + opt.out + " is not a directory");
   if (!opt.json.empty()) check_output_path(opt.json);
   const WorldFile world = load_world(opt.world);
 

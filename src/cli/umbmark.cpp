@@ -27,27 +27,6 @@ int run_umbmark(const UmbmarkOptions& opt) {
   if (opt.side && !(*opt.side > 0)) throw UsageError("--side must be > 0");
   const Suite suite = load_suite(opt.suite);
   const UmbmarkResult r = umbmark(suite, opt.cw, opt.ccw, opt.side);
-  // Cross-check without UMBmark's small-angle approximations: the maximum-likelihood fit of Ed
-  // and Eb on the same runs with the full model.
-  Suite squares = suite;
-  squares.experiments.clear();
-  for (const std::string& list : {opt.cw, opt.ccw}) {
-    std::size_t start = 0;
-    while (true) {
-      const std::size_t comma = list.find(',', start);
-      const std::string name = list.substr(start, comma - start);
-      for (const SuiteExperiment& e : suite.experiments) {
-        if (e.name == name) squares.experiments.push_back(e);
-      }
-      if (comma == std::string::npos) break;
-      start = comma + 1;
-    }
-  }
-  const FitResult ml = fit(squares, suite_model(squares),
-                           {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"});
-  const double ml_ed = ml.values(0), ml_eb = ml.values(1);
-  const double ml_emax = umbmark_emax(suite, opt.cw, opt.ccw, 2 / (ml_ed + 1), 2 * ml_ed / (ml_ed + 1),
-                                      ml_eb * suite.robot.wheelbase_m);
   std::ostringstream out;
   out << "odomcov umbmark: " << suite.name << ", square side L = " << fixed(r.side_m, 4)
       << " m, b = " << suite.robot.wheelbase_m << " m\n"
@@ -64,9 +43,9 @@ int run_umbmark(const UmbmarkOptions& opt) {
       << fixed(1000 * r.emax_after, 2) << " mm after re-integrating with the corrections\n"
       << "    after: CW " << cg(r.cg_cw_after) << "   CCW " << cg(r.cg_ccw_after) << "\n"
       << "  cross-check, maximum-likelihood fit on the same runs (no small-angle approximation):\n"
-      << "    Ed = " << fixed(ml.values(0), 6) << " +/- " << sci(ml.stderrs(0), 1)
-      << ", Eb = " << fixed(ml.values(1), 6) << " +/- " << sci(ml.stderrs(1), 1) << "\n"
-      << "    Emax,sys after re-integrating with these instead: " << fixed(1000 * ml_emax, 2)
+      << "    Ed = " << fixed(r.ml_Ed, 6) << " +/- " << sci(r.ml_Ed_stderr, 1)
+      << ", Eb = " << fixed(r.ml_Eb, 6) << " +/- " << sci(r.ml_Eb_stderr, 1) << "\n"
+      << "    Emax,sys after re-integrating with these instead: " << fixed(1000 * r.ml_emax_after, 2)
       << " mm\n";
   std::cout << out.str();
   if (!opt.json.empty()) {
@@ -87,9 +66,9 @@ int run_umbmark(const UmbmarkOptions& opt) {
                                  {"cg_ccw_after", vec(r.cg_ccw_after)},
                                  {"runs_cw", r.runs_cw},
                                  {"runs_ccw", r.runs_ccw},
-                                 {"ml_fit", {{"Ed", ml.values(0)}, {"Eb", ml.values(1)},
-                                             {"stderr", {{"Ed", ml.stderrs(0)}, {"Eb", ml.stderrs(1)}}},
-                                             {"emax_sys_after", ml_emax}}}});
+                                 {"ml_fit", {{"Ed", r.ml_Ed}, {"Eb", r.ml_Eb},
+                                             {"stderr", {{"Ed", r.ml_Ed_stderr}, {"Eb", r.ml_Eb_stderr}}},
+                                             {"emax_sys_after", r.ml_emax_after}}}});
   }
   return kExitOk;
 }

@@ -52,13 +52,6 @@ std::string effect_yaml(const EffectSpec& spec) {
   return text + "}";
 }
 
-bool effects_are_stochastic(const EffectList& list) {
-  for (const auto& effect : effects::instantiate(list)) {
-    if (effect->stochastic()) return true;
-  }
-  return false;
-}
-
 namespace effects {
 
 std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
