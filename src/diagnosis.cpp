@@ -112,7 +112,7 @@ double excess_kurtosis(const std::vector<double>& x) {
 /// its sample excess kurtosis times its variance squared, weighted by travel) gives
 /// rate sigma^4 = (16/3) sum kappa4 / sum d and sigma^2 = rate sigma^4 / q. Returns NaN when no
 /// straight experiment of ten runs or more shows heavy tails.
-double bumps_sigma(const Suite& suite, double q) {
+double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
   double cumulant = 0.0, travel = 0.0;
   for (const SuiteExperiment& ex : suite.experiments) {
     if (ex.logged || ex.runs.size() < 10) continue;
@@ -125,7 +125,7 @@ double bumps_sigma(const Suite& suite, double q) {
     }
     if (!straight || d <= 0) continue;
     std::vector<double> along;
-    for (const SuiteRun& r : ex.runs) along.push_back(r.error().x());
+    for (const SuiteRun& r : ex.runs) along.push_back(run_error(ex, r, wheelbase_m).x());
     double mean = 0, var = 0;
     for (double v : along) mean += v / static_cast<double>(along.size());
     for (double v : along) var += (v - mean) * (v - mean) / static_cast<double>(along.size() - 1);
@@ -212,7 +212,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       const double sigma_fixed = spec->values[1];
       const double q = f.values(offset) * sigma_fixed * sigma_fixed;
       const double q_se = se(offset) * sigma_fixed * sigma_fixed;
-      const double sigma = bumps_sigma(suite, q);
+      const double sigma = bumps_sigma(suite, c.model.robot.wheelbase_m, q);
       const double s = std::isfinite(sigma) ? sigma : sigma_fixed;
       spec->values = {q / (s * s), s};
       c.parameters = {"rate", "sigma"};

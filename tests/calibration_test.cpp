@@ -1,5 +1,6 @@
 // compare, fit and UMBmark on synthesised suites whose truth is known.
 #include "odomcov/calibration.hpp"
+#include "odomcov/comparison.hpp"
 
 #include <gtest/gtest.h>
 

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include "odomcov/likelihood.hpp"
+
 #include "odomcov/error.hpp"
 #include "odomcov/optiodom.hpp"
 
@@ -20,13 +22,28 @@ TEST(Suite, LogsIntegrateTheirOwnOdometryUpToTheLastReference) {
   // log_a's last reference is on its third row: two pieces, rows after it ignored.
   ASSERT_EQ(ex.runs[0].pieces.size(), 2u);
   Vector3 odo = drive(drive(Vector3::Zero(), {0.05, 0.05}, 0.4), {0.05, 0.07}, 0.4);
-  EXPECT_LT((ex.runs[0].odometry - odo).norm(), 1e-15);
+  EXPECT_LT((odometry_end_pose(ex, ex.runs[0], 0.4) - odo).norm(), 1e-15);
   EXPECT_EQ(ex.runs[0].measured, Vector3(0.109, 0.005, 0.05));
   EXPECT_EQ(ex.runs[0].id, "log_a");
-  EXPECT_LT((ex.runs[0].error() - (Vector3(0.109, 0.005, 0.05) - odo)).norm(), 1e-15);
+  EXPECT_LT((run_error(ex, ex.runs[0], 0.4) - (Vector3(0.109, 0.005, 0.05) - odo)).norm(), 1e-15);
   // Residuals come from each run's own prediction.
   const auto res = residuals(s, suite_model(s));
   EXPECT_NE(res[0][0].cov, res[0][1].cov);
+}
+
+// Review defect 5 (stale odometry): a run's error must follow the wheelbase of the model it is
+// set against, for logged runs and planned paths alike, since a fit may move the wheelbase.
+TEST(Suite, ErrorsFollowTheModelsWheelbase) {
+  const Suite s = load_suite(kSuites + "good_logs.yaml");
+  SuiteModel model = suite_model(s);
+  model.robot.wheelbase_m = 0.41;
+  const auto res = residuals(s, model);
+  const SuiteExperiment& ex = s.experiments[0];
+  for (std::size_t r = 0; r < ex.runs.size(); ++r) {
+    EXPECT_LT((res[0][r].error - run_error(ex, ex.runs[r], 0.41)).norm(), 1e-15);
+  }
+  // log_a turns, so its odometry does depend on the wheelbase.
+  EXPECT_GT((run_error(ex, ex.runs[0], 0.41) - run_error(ex, ex.runs[0], 0.4)).norm(), 1e-6);
 }
 
 TEST(Suite, BadFilesNameFileLineAndColumn) {

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "odomcov/suite.hpp"
+#include "odomcov/likelihood.hpp"
 
 namespace odomcov {
 

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "odomcov/calibration.hpp"
-#include "odomcov/suite.hpp"
+#include "odomcov/comparison.hpp"
 
 namespace odomcov {
 

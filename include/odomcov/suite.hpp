@@ -7,7 +7,6 @@
 
 #include "odomcov/effects.hpp"
 #include "odomcov/path.hpp"
-#include "odomcov/statistics.hpp"
 
 namespace YAML {
 class Node;
@@ -27,14 +26,13 @@ struct MeasurementNoise {
 MeasurementNoise parse_measurement_noise(const YAML::Node& node, const std::string& file,
                                          const std::string& key);
 
+/// One measured run. It keeps what was measured and the encoder travel, never an odometry pose:
+/// the odometry depends on the wheelbase the model uses, so it is computed where it is needed
+/// (odometry_end_pose), at that wheelbase.
 struct SuiteRun {
   std::string id;                   // the CSV's run column, or the log file's name
   Vector3 measured = Vector3::Zero();  // reference end pose, start frame
-  Vector3 odometry = Vector3::Zero();  // odometry end pose (from the path or the run's log)
-  std::vector<ArcSegment> pieces;   // logged runs: one piece per log row; else empty
-
-  /// The error as SPEC defines it: measured (true) - odometry, theta wrapped.
-  Vector3 error() const;
+  std::vector<ArcSegment> pieces;   // logged runs: one piece per log row up to the reference
 };
 
 struct SuiteExperiment {
@@ -73,74 +71,12 @@ SuiteModel suite_model(const Suite& suite);
 std::string robot_yaml(const Robot& robot);
 std::string model_yaml(const SuiteModel& model);
 
-/// One run set against the model: its error (measured - odometry at the model's wheelbase) and
-/// the predicted mean and covariance, measurement noise included. The predicted mean is the
-/// systematic mean plus the noise-induced mean (propagation.hpp).
-struct RunResidual {
-  Vector3 error = Vector3::Zero();
-  Vector3 mean = Vector3::Zero();
-  Matrix3 cov = Matrix3::Zero();
-};
+/// The odometry end pose of a run at `wheelbase_m`: its logged encoder travel integrated piece
+/// by piece, or the experiment's sampled path.
+Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
-/// Residuals of every run of every experiment (runs with logs are predicted one by one, in
-/// parallel).
-std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model);
-
-/// Each run's term of the log-likelihood, in order (experiment by experiment): the Gaussian
-/// log-density of its error, or with `scatter` its term of scatter_log_likelihood.
-std::vector<double> run_log_likelihoods(const std::vector<std::vector<RunResidual>>& residuals,
-                                        bool scatter);
-
-/// Sum over runs of the Gaussian log-density of the error under its prediction.
-double log_likelihood(const std::vector<std::vector<RunResidual>>& residuals);
-
-/// The scatter part of the log-likelihood: only the spread of each experiment's runs about
-/// their own mean counts (Wishart likelihood of the within-experiment scatter, [Anderson03]
-/// §7.2): for residuals r_i = e_i - mu_i,
-///   sum_i -1/2 (r_i - r_bar)' Sigma_i^-1 (r_i - r_bar) - 1/2 ((n-1)/n) ln det(2 pi Sigma_i).
-/// A misfit of the mean does not enter, so a variance effect cannot gain by absorbing one.
-double scatter_log_likelihood(const std::vector<std::vector<RunResidual>>& residuals);
-
-/// compare for one experiment (SPEC "JSON of compare").
-struct ExperimentComparison {
-  std::string name;
-  std::int64_t n = 0;
-  SampleMoments measured;                 // of the errors
-  Vector3 predicted_mean = Vector3::Zero();  // for a run drawn from the experiment
-  Matrix3 predicted_cov = Matrix3::Zero();   // (mixture over runs for logged experiments)
-  TestResult mean_test;   // Hotelling's T^2 on whitened residuals (chi^2 when n <= 3)
-  TestResult cov_test;    // LRT of cov = I on whitened residuals (NEES test when n < 10)
-  std::string cov_method;  // "lrt" or "nees"
-  double nees_mean = 0.0;
-  double outside_95 = 0.0;  // fraction of runs with NEES above the chi^2_3 95% point
-  double log_likelihood = 0.0;
-  std::string verdict;
-  std::vector<Vector3> errors;  // each run's error (measured - odometry), in order
-  // Per component (x, y, theta), for the plain-words failures:
-  Vector3 mean_t = Vector3::Zero();        // (measured - predicted mean)/standard error
-  Vector3 mean_p = Vector3::Ones();        // Student-t p-values
-  Vector3 variance_ratio = Vector3::Ones();  // measured / predicted variance
-  Vector3 variance_p = Vector3::Ones();    // chi^2 p-values (two-sided)
-};
-
-struct Comparison {
-  double alpha = 0.0;           // family-wise level of the suite
-  double alpha_per_test = 0.0;  // Bonferroni over 2 tests per experiment + kurtosis
-  std::vector<ExperimentComparison> experiments;
-  TestResult kurtosis;  // Mardia's b2, each experiment standardised by its own covariance
-  double mardia_b2 = 0.0;        // run-weighted mean of the experiments' b2
-  double mardia_expected = 0.0;  // its expectation for Gaussian errors (15 (n-1)/(n+1))
-  double kurtosis_scale = 1.0;   // pooled b2/E b2 when the covariance LRTs were kurtosis-scaled
-  double log_likelihood = 0.0;
-  std::string verdict;
-  std::vector<std::string> failures;  // plain words, worst experiment first
-};
-
-/// The model against every experiment of the suite ("where it fails" included). The kurtosis
-/// test joins the verdict unless the model has a heavy-tailed effect (bumps), which predicts it;
-/// such a model's covariance LRTs are then scaled by each experiment's measured kurtosis
-/// ([Browne84]).
-Comparison compare(const Suite& suite, const SuiteModel& model, double alpha);
+/// The error as the SPEC defines it at `wheelbase_m`: measured (true) - odometry, theta wrapped.
+Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
 /// The odometry end pose of a sampled path: the encoder samples integrated with the exact arc
 /// update at the nominal wheelbase, as the simulator integrates them.

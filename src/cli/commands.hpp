@@ -5,7 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "odomcov/suite.hpp"
+#include "odomcov/comparison.hpp"
 #include "odomcov/validation.hpp"
 
 namespace odomcov::cli {

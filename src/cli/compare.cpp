@@ -4,7 +4,7 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/suite.hpp"
+#include "odomcov/comparison.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {
