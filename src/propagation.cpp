@@ -154,25 +154,21 @@ std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m) {
   return pieces;
 }
 
-Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
-                   const EffectList& effect_list) {
-  const auto active = effects::instantiate(effect_list);
-  int constants = 0;
+namespace effects {
+
+ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces, const Robot& robot,
+                     const EffectList& effect_list) {
+  const auto active = instantiate(effect_list);
+  ResolvedPath out;
   double scale_left = 1.0, scale_right = 1.0, wheelbase_factor = 1.0;
   for (const auto& e : active) {
-    constants += e->run_constants();
+    out.run_constants += e->run_constants();
     e->systematic(scale_left, scale_right, wheelbase_factor);
   }
   const double B = robot.wheelbase_m;
-
-  Prediction out;
-  Matrix3 P = Matrix3::Zero();                          // tangential, along the true path
-  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(3, constants);  // cov(e, per-run constants)
-  Vector3 true_pose = Vector3::Zero();
-  Vector3 odometry = Vector3::Zero();
-  Complex noise_mean = 0.0;
-  for (const ArcSegment& encoder : pieces) {
-    effects::PieceModel m;
+  out.pieces.reserve(encoder_pieces.size());
+  for (const ArcSegment& encoder : encoder_pieces) {
+    PieceModel m;
     m.encoder = encoder;
     m.wheelbase_m = B;
     m.noise = robot.noise;
@@ -183,30 +179,52 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
         robot.noise.k_right * robot.noise.k_right * std::abs(encoder.right_m);
     for (const auto& e : active) e->model(m);
 
+    ResolvedPiece r;
+    r.encoder = encoder;
     const ArcSegment travel{m.scale_left * encoder.left_m, m.scale_right * encoder.right_m};
-    const double b_true = m.wheelbase_factor * B;
-    const double d = travel.center_m();
-    const double a = travel.heading_change_rad(b_true);
+    r.wheelbase_true_m = m.wheelbase_factor * B;
+    r.center_m = travel.center_m();
+    r.angle_rad = travel.heading_change_rad(r.wheelbase_true_m);
     Eigen::Matrix2d to_input;  // (e_L, e_R) -> (e_dtheta, e_d)
-    to_input << -1.0 / b_true, 1.0 / b_true, 0.5, 0.5;
-    Matrix2 intensity = to_input * m.wheel_cov * to_input.transpose();
-    intensity(0, 0) += m.heading_var;
-
-    const Matrix3 phi = arc_transition(d, a);
-    const Matrix3 q = arc_noise_covariance(d, a, intensity);
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(3, constants);
-    if (constants > 0) {
-      Eigen::MatrixXd columns(2, constants);
-      for (int c = 0; c < constants; ++c) columns.col(c) = m.run_columns.at(static_cast<std::size_t>(c));
-      A = arc_input_gain(d, a) * to_input * columns;
+    to_input << -1.0 / r.wheelbase_true_m, 1.0 / r.wheelbase_true_m, 0.5, 0.5;
+    r.intensity = to_input * m.wheel_cov * to_input.transpose();
+    r.intensity(0, 0) += m.heading_var;
+    r.input_columns.resize(2, out.run_constants);
+    for (int c = 0; c < out.run_constants; ++c) {
+      r.input_columns.col(c) = to_input * m.run_columns.at(static_cast<std::size_t>(c));
     }
+    out.pieces.push_back(std::move(r));
+  }
+  return out;
+}
+
+}  // namespace effects
+
+Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                   const EffectList& effect_list) {
+  const effects::ResolvedPath path = effects::resolve(pieces, robot, effect_list);
+  const int constants = path.run_constants;
+  const double B = robot.wheelbase_m;
+
+  Prediction out;
+  Matrix3 P = Matrix3::Zero();                          // tangential, along the true path
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(3, constants);  // cov(e, per-run constants)
+  Vector3 true_pose = Vector3::Zero();
+  Vector3 odometry = Vector3::Zero();
+  Complex noise_mean = 0.0;
+  for (const effects::ResolvedPiece& r : path.pieces) {
+    const double d = r.center_m;
+    const double a = r.angle_rad;
+    const Matrix3 phi = arc_transition(d, a);
+    const Matrix3 q = arc_noise_covariance(d, a, r.intensity);
+    const Eigen::MatrixXd A = arc_input_gain(d, a) * r.input_columns;
     const double v0 = P(2, 2);
     const Matrix3 cross = phi * C * A.transpose();
     P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
     C = phi * C + A;
-    noise_mean += noise_mean_of_piece(true_pose.z(), d, a, v0, P(2, 2) - v0, intensity(0, 1));
+    noise_mean += noise_mean_of_piece(true_pose.z(), d, a, v0, P(2, 2) - v0, r.intensity(0, 1));
     true_pose = compose(true_pose, arc_displacement(d, a));
-    odometry = drive(odometry, encoder, B);
+    odometry = drive(odometry, r.encoder, B);
   }
   out.odometry_end_pose = odometry;
   out.true_end_pose = true_pose;

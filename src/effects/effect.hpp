@@ -11,6 +11,7 @@
 
 #include "odomcov/closed_form.hpp"
 #include "odomcov/effects.hpp"
+#include "odomcov/path.hpp"
 #include "random.hpp"
 
 namespace odomcov::effects {
@@ -101,6 +102,29 @@ class Effect {
   /// The effect's random part on one piece (systematic factors are already in `piece`).
   virtual void model(PieceModel& piece) const { (void)piece; }
 };
+
+/// A piece as every propagator sees it once the effects have spoken: the true motion (systematic
+/// factors applied), the white noise intensity of (e_dtheta, e_d) over the piece, and the effect
+/// of each standard-normal per-run constant on (e_dtheta, e_d). The first-order engine (predict)
+/// and any higher-order propagator consume these, so effects are modelled in one place.
+struct ResolvedPiece {
+  ArcSegment encoder;            // encoder travel over the piece
+  double center_m = 0.0;         // true centre travel d
+  double angle_rad = 0.0;        // true heading change a
+  double wheelbase_true_m = 0.0;
+  Matrix2 intensity = Matrix2::Zero();  // cov of (e_dtheta, e_d) accumulated over the piece
+  Eigen::MatrixXd input_columns;        // 2 x run_constants: per-run constants -> (e_dtheta, e_d)
+};
+
+struct ResolvedPath {
+  std::vector<ResolvedPiece> pieces;
+  int run_constants = 0;
+};
+
+/// Applies every effect's model side to each encoder piece (systematic factors first, then each
+/// effect's `model`) for a robot (nominal wheelbase, model's wheel noise).
+ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces, const Robot& robot,
+                     const EffectList& effects);
 
 /// A catalogue entry: the public description plus the factory.
 struct EffectType {
