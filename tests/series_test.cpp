@@ -1,11 +1,15 @@
-// The series kernels against a quad-precision (__float128) evaluation of their closed forms.
+// The series kernels against a quad-precision evaluation of their closed forms: __float128 with
+// libquadmath on x86-64, long double where it is IEEE binary128 (aarch64 Linux).
 // The reference's own error is at most ~80 * 1e-34 / x^4 (a4) relative, below 1e-19 for the
 // x >= 1e-3 used here; below that, the exact Taylor polynomial to x^4 (error < x^6 terms, i.e.
 // < 1e-18 relative) is the reference.
 #include <gtest/gtest.h>
-#include <quadmath.h>
 
+#include <cfloat>
 #include <cmath>
+#if LDBL_MANT_DIG != 113
+#include <quadmath.h>
+#endif
 #include <limits>
 #include <vector>
 
@@ -16,14 +20,24 @@ namespace {
 
 constexpr double kEps = std::numeric_limits<double>::epsilon();
 
-__float128 u3_quad(__float128 y) { return (y - sinq(y)) / (y * y * y); }
-__float128 sincq(__float128 x) { return sinq(x) / x; }
-__float128 a4_quad(__float128 x) {
-  return (__float128(1.5) - 2 * sincq(x) + sincq(2 * x) / 2) / (x * x * x * x);
+#if LDBL_MANT_DIG == 113
+using Quad = long double;  // IEEE binary128 (aarch64)
+Quad sin_quad(Quad x) { return std::sin(x); }
+Quad abs_quad(Quad x) { return std::fabs(x); }
+#else
+using Quad = __float128;
+Quad sin_quad(Quad x) { return sinq(x); }
+Quad abs_quad(Quad x) { return fabsq(x); }
+#endif
+
+Quad u3_quad(Quad y) { return (y - sin_quad(y)) / (y * y * y); }
+Quad sinc_quad(Quad x) { return sin_quad(x) / x; }
+Quad a4_quad(Quad x) {
+  return (Quad(1.5) - 2 * sinc_quad(x) + sinc_quad(2 * x) / 2) / (x * x * x * x);
 }
 
-double rel_err(double got, __float128 want) {
-  return static_cast<double>(fabsq((static_cast<__float128>(got) - want) / want));
+double rel_err(double got, Quad want) {
+  return static_cast<double>(abs_quad((static_cast<Quad>(got) - want) / want));
 }
 
 /// Arguments log-spaced over [1e-3, 60], both signs, plus points just either side of each switch.
@@ -58,7 +72,7 @@ TEST(Series, A4MatchesQuadPrecision) {
 
 TEST(Series, SincMatchesQuadPrecision) {
   double worst = 0.0;
-  for (double x : arguments()) worst = std::max(worst, rel_err(sinc(x), sincq(x)));
+  for (double x : arguments()) worst = std::max(worst, rel_err(sinc(x), sinc_quad(x)));
   EXPECT_LE(worst, 2 * kEps);
 }
 

@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Cross-builds odomcov for aarch64 (64-bit ARM: Jetson, Raspberry Pi) with Debian's cross compiler
+# and runs the GoogleTest unit tests (the ctest names with a dot, Suite.Case) under qemu-user.
+# The CLI tests are left out: they start the binary from shell scripts, which would need the
+# kernel's binfmt registration of qemu, which CI cannot set. The arm64 libraries are Debian's packages, downloaded
+# and extracted into a sysroot under build-aarch64/ (never installed, so the host is unchanged).
+#   scripts/cross_aarch64.sh [ctest arguments...]
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+out="$root/build-aarch64"
+sysroot="$out/sysroot"
+
+host_packages=(g++-aarch64-linux-gnu qemu-user)
+arm_packages=(libtbb-dev libtbb12 libtbbmalloc2 libtbbbind-2-5 libhwloc15 libyaml-cpp-dev libyaml-cpp0.7
+              libnlopt-dev libnlopt-cxx-dev libnlopt-cxx0 libnlopt0 libgtest-dev libgmock-dev)
+
+sudo_cmd=()
+[ "$(id -u)" -eq 0 ] || sudo_cmd=(sudo)
+missing=()
+for p in "${host_packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+need_update=0
+if ! dpkg --print-foreign-architectures | grep -qx arm64; then
+  "${sudo_cmd[@]}" dpkg --add-architecture arm64
+  need_update=1
+fi
+if [ ${#missing[@]} -gt 0 ] || [ $need_update -eq 1 ]; then
+  export DEBIAN_FRONTEND=noninteractive
+  "${sudo_cmd[@]}" apt-get update -qq >/dev/null
+  [ ${#missing[@]} -eq 0 ] || "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+if [ ! -f "$sysroot/.complete" ]; then
+  rm -rf "$sysroot" "$out/debs"
+  mkdir -p "$sysroot" "$out/debs"
+  (cd "$out/debs" && apt-get download -qq "${arm_packages[@]/%/:arm64}" 2>/dev/null)
+  for deb in "$out"/debs/*.deb; do dpkg-deb -x "$deb" "$sysroot"; done
+  # Header-only, architecture-independent packages come from the host through links.
+  mkdir -p "$sysroot/host-headers"
+  ln -sfn /usr/include/boost "$sysroot/host-headers/boost"
+  ln -sfn /usr/include/Random123 "$sysroot/host-headers/Random123"
+  touch "$sysroot/.complete"
+fi
+
+cmake -S "$root" -B "$out/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+      -DCMAKE_TOOLCHAIN_FILE="$root/cmake/toolchains/aarch64-linux-gnu.cmake" \
+      -DODOMCOV_AARCH64_SYSROOT="$sysroot" -DODOMCOV_BUILD_BENCHMARKS=OFF >/dev/null
+cmake --build "$out/build" --parallel "$(nproc)" -- --quiet
+file "$out/build/src/cli/odomcov" | grep -q "ARM aarch64" || { echo "cross_aarch64: not an aarch64 binary" >&2; exit 1; }
+cd "$out/build"
+ctest --output-on-failure --parallel "$(nproc)" -R "[.]" "$@"
