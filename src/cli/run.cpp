@@ -87,10 +87,11 @@ std::string report(const Config& config, const Validation& v, int threads) {
       << ", 0); mean test against theory + it: " << test_text(v.noise_induced_mean_test) << "\n"
       << "  per-sample first-order covariance [Wang88] (noise lumped per sample):\n";
   if (v.sampled_cov_test.valid) {
+    const Matrix3& closed = v.order == 1 ? v.theory_cov : v.other.theory_cov;
     out << "    std-dev ratio to the closed form ("
-        << fixed(std::sqrt(v.sampled_cov(0, 0) / v.theory_cov(0, 0)), 4) << ", "
-        << fixed(std::sqrt(v.sampled_cov(1, 1) / v.theory_cov(1, 1)), 4) << ", "
-        << fixed(std::sqrt(v.sampled_cov(2, 2) / v.theory_cov(2, 2)), 4)
+        << fixed(std::sqrt(v.sampled_cov(0, 0) / closed(0, 0)), 4) << ", "
+        << fixed(std::sqrt(v.sampled_cov(1, 1) / closed(1, 1)), 4) << ", "
+        << fixed(std::sqrt(v.sampled_cov(2, 2) / closed(2, 2)), 4)
         << "); covariance test against it: " << test_text(v.sampled_cov_test) << "\n";
   } else {
     out << "    not available with model effects\n";
