@@ -8,7 +8,7 @@
 // (E[X f(psi)] = Cov(X, psi) E[f'(psi)] for jointly Gaussian zero-mean X, psi) give E[p],
 // Cov(p, conj p), Cov(p, p), Cov(p, phi_end) and Var(phi_end) as single and double integrals
 // along the path, with no truncation in the noise. The integrals are done by Gauss-Legendre
-// quadrature per model piece (<= 0.25 rad, <= 0.25 m).
+// quadrature per piece (<= 0.25 rad, <= 1 m; equal consecutive model pieces are merged first).
 //
 // Exact for the white wheel noise, wheel noise correlation, turn slip, per-run radius and every
 // systematic effect; bumps enter through their Gaussian equivalent (an approximation: the
