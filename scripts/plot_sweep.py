@@ -2,7 +2,9 @@
 """Breakdown curves of a sweep: where first-order theory stops matching the simulation.
 
 Reads the CSV of `odomcov sweep` (and optionally its --json, which adds the tests against the
-noise-induced mean and against the per-sample first-order covariance, [Wang88]). The
+noise-induced mean and against the per-sample first-order covariance, [Wang88], and the other
+model order's tests: the CSV follows the sweep's --order, and the JSON has both orders, so the
+first panel overlays both orders' breakdown curves). The
 first grid axis, or --x, is the horizontal axis on a log scale; each combination of the other
 axes is one line. Three panels:
   1. the p-values of the mean and covariance tests, with the alpha line; filled markers are
@@ -95,14 +97,22 @@ def main():
     if x_axis not in axes:
         parser.error(f"--x {x_axis} is not a grid axis ({', '.join(axes)})")
     others = [a for a in axes if a != x_axis]
-    induced, joint, sampled = {}, {}, {}
+    induced, joint, sampled, other = {}, {}, {}, {}
+    order, other_order = 1, None
     if args.json:
         with open(args.json) as f:
-            for r in json.load(f)["rows"]:
-                key = tuple(r["axes"][a] for a in axes)
-                induced[key] = r["noise_induced_mean"]["test"]["p_value"]
-                joint[key] = math.sqrt(r["tests"]["mean"]["statistic"] or 0.0)
-                sampled[key] = r["sampled_theory"]["test"]["p_value"]
+            doc = json.load(f)
+        order = doc.get("order", 1)
+        for r in doc["rows"]:
+            key = tuple(r["axes"][a] for a in axes)
+            induced[key] = r["noise_induced_mean"]["test"]["p_value"]
+            joint[key] = math.sqrt(r["tests"]["mean"]["statistic"] or 0.0)
+            sampled[key] = r["sampled_theory"]["test"]["p_value"]
+            for name in r:
+                if name.startswith("order_"):
+                    other_order = int(name[len("order_"):])
+                    t = r[name]["tests"]
+                    other[key] = (t["mean"]["p_value"], t["covariance"]["p_value"])
 
     groups = {}
     for r in rows:
@@ -118,8 +128,9 @@ def main():
         name = ", ".join(f"{a} = {v:g}" for a, v in zip(others, key))
         suffix = f" ({name})" if name else ""
         bad = [r["verdict"] == "inconsistent" for r in members]
-        for metric, marker, label in (("p_mean", "o", "mean test"),
-                                      ("p_cov", "s", "covariance test")):
+        cov_name = "covariance test (ADF)" if order == 2 else "covariance test (LRT)"
+        for metric, marker, label in (("p_mean", "o", f"order {order}: mean test"),
+                                      ("p_cov", "s", f"order {order}: {cov_name}")):
             ps = [max(r[metric], P_FLOOR) for r in members]
             ax_p.plot(xs, ps, "-" if metric == "p_mean" else "--", color=color, lw=1,
                       label=label + suffix)
@@ -130,7 +141,20 @@ def main():
             if note:
                 ax_p.axvline(flip, color=color, ls=":" if metric == "p_mean" else "-.", lw=1)
                 notes.append(f"{label}{suffix}: {note}")
-        if induced:
+        if other:
+            other_cov = "covariance test (ADF)" if other_order == 2 else "covariance test (LRT)"
+            for index, marker, label in ((0, "D", f"order {other_order}: mean test"),
+                                         (1, "P", f"order {other_order}: {other_cov}")):
+                raw = [other.get(tuple(r[a] for a in axes), (float("nan"),) * 2)[index]
+                       for r in members]
+                ps = [max(p if p is not None else P_FLOOR, P_FLOOR) for p in raw]
+                ax_p.plot(xs, ps, "-" if index == 0 else "--", marker=marker, ms=5, lw=2,
+                          alpha=0.6, color=color, label=label + suffix)
+                flip, note = rejection_note(xs, [p if p is not None else 0.0 for p in raw],
+                                            args.alpha, args.x_label or x_axis)
+                if note:
+                    notes.append(f"{label}{suffix}: {note}")
+        if induced and order == 1:
             ps = [max(induced.get(tuple(r[a] for a in axes), float("nan")) or P_FLOOR, P_FLOOR)
                   for r in members]
             ax_p.plot(xs, ps, ":", marker="^", color=color, ms=4, lw=1,

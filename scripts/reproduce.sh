@@ -36,8 +36,14 @@ if want sweeps; then
     --json "$out/noise_breakdown.json"
   "$python" "$root/scripts/plot_sweep.py" "$out/noise_breakdown.csv" --json "$out/noise_breakdown.json" \
     --x-factor 1e-3 --x-label "kL = kR [m^1/2]" \
-    --title "First-order theory against wheel noise: Fig. 7 path, 10 000 runs per point" \
+    --title "Order 1 (and order 2 overlaid) against wheel noise: Fig. 7 path, 10 000 runs per point" \
     --out "$out/noise_breakdown.png"
+  "$odomcov" sweep "$root/configs/sweeps/noise_breakdown.yaml" --order 2 \
+    --out "$out/noise_breakdown_order2.csv" --json "$out/noise_breakdown_order2.json"
+  "$python" "$root/scripts/plot_sweep.py" "$out/noise_breakdown_order2.csv" \
+    --json "$out/noise_breakdown_order2.json" --x-factor 1e-3 --x-label "kL = kR [m^1/2]" \
+    --title "Order 2 (and order 1 overlaid) against wheel noise: Fig. 7 path, 10 000 runs per point" \
+    --out "$out/noise_breakdown_order2.png"
   "$odomcov" sweep "$root/configs/sweeps/sample_rate.yaml" --out "$out/sample_rate.csv" \
     --json "$out/sample_rate.json"
   "$python" "$root/scripts/plot_sweep.py" "$out/sample_rate.csv" --json "$out/sample_rate.json" \

@@ -3,11 +3,34 @@
 #include <algorithm>
 
 #include "odomcov/propagation.hpp"
+#include "odomcov/second_order.hpp"
 
 namespace odomcov {
+namespace {
+
+/// The order-2 theory and its tests: mean chi^2 (valid for any distribution by the CLT) and
+/// Browne's ADF covariance test, which takes the sample's own fourth moments.
+OrderResult order2_result(const Config& config, const SampleMoments& sim, double alpha) {
+  OrderResult r;
+  r.order = 2;
+  const Prediction p = predict_second_order(model_pieces(config.path, config.robot.wheelbase_m),
+                                            config.robot, config.model_effects);
+  r.theory_mean = p.mean + p.noise_mean;
+  r.theory_cov = p.cov;
+  r.theory_source = "order 2: exact Gaussian-heading moments";
+  for (const EffectSpec& e : config.model_effects) r.theory_source += " " + effect_yaml(e).substr(2);
+  r.mean_test = mean_test_known_covariance(sim, r.theory_mean, r.theory_cov);
+  r.cov_test = covariance_test_adf(sim, r.theory_cov);
+  r.cov_lrt = covariance_test(sim, r.theory_cov);
+  r.nees_mean = nees_mean(sim, r.theory_mean, r.theory_cov);
+  r.verdict = verdict(r.mean_test, r.cov_test, alpha);
+  return r;
+}
+
+}  // namespace
 
 Validation validate(const Config& config, double alpha, int threads, Progress* progress,
-                    std::int64_t keep_samples) {
+                    std::int64_t keep_samples, int order) {
   Validation v;
   v.runs = config.simulation.runs;
   v.seed = config.simulation.seed;
@@ -45,11 +68,35 @@ Validation validate(const Config& config, double alpha, int threads, Progress* p
   v.noise_induced_mean = noise_mean;
   v.noise_induced_mean_test =
       mean_test_known_covariance(v.simulation, v.theory_mean + noise_mean, v.theory_cov);
+  // The other order (or, with --order 2, this one's fields from it).
+  OrderResult first;
+  first.order = 1;
+  first.theory_mean = v.theory_mean;
+  first.theory_cov = v.theory_cov;
+  first.theory_source = v.theory_source;
+  first.mean_test = v.mean_test;
+  first.cov_test = v.cov_test;
+  first.nees_mean = v.nees_mean;
+  first.verdict = v.verdict;
+  const OrderResult second = order2_result(config, v.simulation, alpha);
+  v.order = order;
+  if (order == 2) {
+    v.theory_mean = second.theory_mean;
+    v.theory_cov = second.theory_cov;
+    v.theory_source = second.theory_source;
+    v.mean_test = second.mean_test;
+    v.cov_test = second.cov_test;
+    v.nees_mean = second.nees_mean;
+    v.verdict = second.verdict;
+    v.other = first;
+  } else {
+    v.other = second;
+  }
   if (config.model_effects.empty()) {
     v.sampled_cov = sampled_covariance(config.path, config.robot);
     v.sampled_cov_test = covariance_test(v.simulation, v.sampled_cov);
   } else {
-    v.sampled_cov = v.theory_cov;  // the per-sample propagation has no effects
+    v.sampled_cov = first.theory_cov;  // the per-sample propagation has no effects
     v.sampled_cov_test.valid = false;
   }
   return v;

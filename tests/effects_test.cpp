@@ -38,6 +38,14 @@ TEST_P(EffectConfig, ModelWithTheEffectPassesAndWithoutIsRejected) {
   EXPECT_EQ(without.verdict, "inconsistent")
       << GetParam() << ": p_mean " << without.mean_test.p_value << ", p_cov "
       << without.cov_test.p_value;
+  // Order 2 (computed beside order 1 by validate) passes the same world and keeps the power.
+  ASSERT_EQ(with.other.order, 2);
+  EXPECT_EQ(with.other.verdict, "consistent")
+      << GetParam() << ", order 2: p_mean " << with.other.mean_test.p_value << ", p_cov (ADF) "
+      << with.other.cov_test.p_value;
+  EXPECT_EQ(without.other.verdict, "inconsistent")
+      << GetParam() << ", order 2: p_mean " << without.other.mean_test.p_value
+      << ", p_cov (ADF) " << without.other.cov_test.p_value;
 }
 
 INSTANTIATE_TEST_SUITE_P(Catalogue, EffectConfig,

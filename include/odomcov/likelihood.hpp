@@ -9,8 +9,9 @@
 namespace odomcov {
 
 /// One run set against the model: its error (measured - odometry at the model's wheelbase) and
-/// the predicted mean and covariance, measurement noise included. The predicted mean is the
-/// systematic mean plus the noise-induced mean (propagation.hpp).
+/// the predicted mean and covariance, measurement noise included, of the model's order
+/// (SuiteModel::order; predict_with_order: logged runs take the order-2 correction on
+/// coarsened pieces). The predicted mean is the systematic mean plus the noise-induced mean.
 struct RunResidual {
   Vector3 error = Vector3::Zero();
   Vector3 mean = Vector3::Zero();

@@ -10,9 +10,20 @@
 
 namespace odomcov {
 
-/// Streaming mean and covariance of 3-vectors: Welford's update for single samples and the
-/// pairwise merge of [Chan79] for partial results, so a parallel reduction can combine blocks.
-/// Memory is constant in the number of samples.
+using Matrix6 = Eigen::Matrix<double, 6, 6>;
+
+/// Streaming mean, covariance and third and fourth central co-moments of 3-vectors: Welford's
+/// update for single samples and the pairwise merge of [Chan79], extended to the third and
+/// fourth co-moments by [Pebay08] eqs. (3.1)-(3.2) for partial results, so a parallel reduction
+/// can combine blocks (in a fixed tree, deterministically). Memory is constant in the number of
+/// samples. With delta = mean_B - mean_A and n = n_A + n_B, sums over the distinct placements
+/// of the indices:
+///   M2_ij   += M2B_ij + d_i d_j n_A n_B / n
+///   M3_ijk  += M3B_ijk + d_i d_j d_k n_A n_B (n_A - n_B)/n^2
+///              + (1/n) sum_3 (n_A M2B_ij - n_B M2A_ij) d_k
+///   M4_ijkl += M4B_ijkl + d_i d_j d_k d_l n_A n_B (n_A^2 - n_A n_B + n_B^2)/n^3
+///              + (1/n^2) sum_6 (n_A^2 M2B_ij + n_B^2 M2A_ij) d_k d_l
+///              + (1/n) sum_4 (n_A M3B_ijk - n_B M3A_ijk) d_l
 class MomentAccumulator {
  public:
   void add(const Vector3& x);
@@ -24,18 +35,28 @@ class MomentAccumulator {
   const Matrix3& scatter() const { return m2_; }
   /// Unbiased sample covariance A/(n - 1).
   Matrix3 covariance() const;
+  /// Sum of fourth-order products of deviations from the mean, M4_ijkl (i, j, k, l in 0..2).
+  double fourth(int i, int j, int k, int l) const { return m4_[((i * 3 + j) * 3 + k) * 3 + l]; }
+  /// The ADF estimate of the asymptotic covariance of sqrt(n) vech(S) [Browne84, eq. (2.10)]:
+  ///   Gamma_(ij),(kl) = M4_ijkl / n - (M2_ij / n)(M2_kl / n),  vech order xx, xy, xt, yy, yt, tt.
+  Matrix6 gamma() const;
 
  private:
   std::int64_t n_ = 0;
   Vector3 mean_ = Vector3::Zero();
   Matrix3 m2_ = Matrix3::Zero();
+  double m3_[27] = {};
+  double m4_[81] = {};
 };
 
-/// Sample moments as reported: n, mean and unbiased covariance.
+/// Sample moments as reported: n, mean and unbiased covariance, and (from an accumulator) the
+/// fourth-moment matrix Gamma of the ADF covariance test.
 struct SampleMoments {
   std::int64_t n = 0;
   Vector3 mean = Vector3::Zero();
   Matrix3 cov = Matrix3::Zero();
+  Matrix6 gamma = Matrix6::Zero();
+  bool has_gamma = false;
 };
 SampleMoments moments(const MomentAccumulator& acc);
 SampleMoments moments(const std::vector<Vector3>& samples);
@@ -68,6 +89,13 @@ TestResult hotelling_test(const SampleMoments& s, const Vector3& mu0);
 ///   rho = 1 - (2p^2 + 3p - 1)/(6 n' (p + 1))  (Bartlett correction, [Muirhead82, Thm 8.4.7]),
 /// asymptotically chi^2 with p(p+1)/2 = 6 dof, with error O(n^-2).
 TestResult covariance_test(const SampleMoments& s, const Matrix3& sigma0);
+
+/// Browne's asymptotically distribution-free test of Sigma = Sigma0 [Browne84, Prop. 4]:
+///   T = n (s - sigma0)' Gamma^-1 (s - sigma0) ~ chi^2_6,  s = vech(S), sigma0 = vech(Sigma0),
+/// with Gamma the sample's own fourth-moment matrix (MomentAccumulator::gamma). Its size holds
+/// for any distribution with finite fourth moments (the banana of large heading noise), where
+/// the LRT's chi^2 assumes normality. Needs has_gamma and n > 6.
+TestResult covariance_test_adf(const SampleMoments& s, const Matrix3& sigma0);
 
 /// Mean NEES, (1/n) sum (x_i - mu)' Sigma^-1 (x_i - mu), from the moments alone:
 /// tr(Sigma^-1 ((n-1)/n S + (m - mu)(m - mu)')). Expected value 3 when the model is right.

@@ -62,6 +62,9 @@ struct SuiteModel {
   Robot robot;
   EffectList effects;
   MeasurementNoise measurement_noise;
+  /// The model order of every prediction (second_order.hpp): 2, exact in the heading noise, is
+  /// the default of compare, fit and diagnose; 1 is the first-order engine.
+  int order = 2;
 };
 SuiteModel suite_model(const Suite& suite);
 

@@ -13,6 +13,22 @@ namespace odomcov {
 
 inline constexpr double kDefaultAlpha = 0.001;
 
+/// The theory of one model order set against the simulation.
+///  * order 1: the first-order closed form (or engine); covariance test = Bartlett-corrected LRT.
+///  * order 2: the exact-moment model (second_order.hpp); covariance test = Browne's ADF test,
+///    whose size does not assume a Gaussian error (the LRT is kept beside it for information).
+struct OrderResult {
+  int order = 1;
+  Vector3 theory_mean = Vector3::Zero();
+  Matrix3 theory_cov = Matrix3::Zero();
+  std::string theory_source;
+  TestResult mean_test;
+  TestResult cov_test;
+  TestResult cov_lrt;  // order 2: the Gaussian LRT against the order-2 covariance (information)
+  double nees_mean = 0.0;
+  std::string verdict;
+};
+
 struct Validation {
   std::int64_t runs = 0;
   std::uint64_t seed = 0;
@@ -25,6 +41,9 @@ struct Validation {
   TestResult cov_test;        // LRT of Sigma = Sigma_theory
   double nees_mean = 0.0;
   std::string verdict;
+  // The order the fields above follow (--order), and the other order's results beside it.
+  int order = 1;
+  OrderResult other;
   // Beyond the continuous first-order theory (information only, not part of the verdict):
   // the noise-induced mean of propagation.hpp with the chi^2 mean test against it, and the
   // first-order covariance of the sampled odometry ([Wang88], sampled_covariance) with the
@@ -40,8 +59,9 @@ struct Validation {
 
 /// Simulates config.simulation.runs runs with config.simulation.seed and tests the end-pose
 /// error against the theory at level alpha. `progress` (optional) counts finished runs.
-/// `keep_samples` asks for the errors of runs 0 .. keep_samples-1 as well.
+/// `keep_samples` asks for the errors of runs 0 .. keep_samples-1 as well. `order` (1 or 2)
+/// chooses the theory of the verdict; the other order is computed too (Validation::other).
 Validation validate(const Config& config, double alpha, int threads = 0,
-                    Progress* progress = nullptr, std::int64_t keep_samples = 0);
+                    Progress* progress = nullptr, std::int64_t keep_samples = 0, int order = 1);
 
 }  // namespace odomcov

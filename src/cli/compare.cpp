@@ -14,6 +14,7 @@ struct CompareOptions {
   std::string suite;
   double alpha = kDefaultAlpha;
   std::string json;
+  int order = 2;
 };
 
 std::string side_by_side(const std::string& left, const std::string& right) {
@@ -99,9 +100,12 @@ namespace {
 
 int run_compare(const CompareOptions& opt) {
   check_alpha(opt.alpha);
+  check_order(opt.order);
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
-  const Comparison c = compare(suite, suite_model(suite), opt.alpha);
+  SuiteModel model = suite_model(suite);
+  model.order = opt.order;
+  const Comparison c = compare(suite, model, opt.alpha);
   std::cout << comparison_text(suite, c);
   if (!opt.json.empty()) write_json_atomic(opt.json, comparison_json(suite, c));
   return kExitOk;
@@ -114,6 +118,9 @@ void setup_compare(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand("compare", "The model against measured runs, and where it fails");
   cmd->add_option("suite", opt->suite, "Measurement suite (YAML)")->required();
   cmd->add_option("--alpha", opt->alpha, "Family-wise significance level over the suite's tests")
+      ->capture_default_str();
+  cmd->add_option("--order", opt->order,
+                  "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
       ->capture_default_str();
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
   cmd->callback([opt, &exit_code] { exit_code = run_compare(*opt); });

@@ -16,6 +16,7 @@ struct DiagnoseOptions {
   std::vector<std::string> effects;
   double alpha = kDiagnoseAlpha;
   std::string json;
+  int order = 2;
 };
 
 json summary_json(const ModelSummary& s) {
@@ -37,7 +38,9 @@ int run_diagnose(const DiagnoseOptions& opt) {
   }
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
-  const SuiteModel model = suite_model(suite);
+  check_order(opt.order);
+  SuiteModel model = suite_model(suite);
+  model.order = opt.order;
   const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects);
 
   std::ostringstream out;
@@ -121,6 +124,9 @@ void setup_diagnose(CLI::App& app, int& exit_code) {
                   "wheel_noise_level)")
       ->delimiter(',');
   cmd->add_option("--alpha", opt->alpha, "Family-wise significance level over the candidates")
+      ->capture_default_str();
+  cmd->add_option("--order", opt->order,
+                  "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
       ->capture_default_str();
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
   cmd->callback([opt, &exit_code] { exit_code = run_diagnose(*opt); });

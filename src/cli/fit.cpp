@@ -16,6 +16,7 @@ struct FitOptions {
   std::string suite;
   std::vector<std::string> params;
   std::string json;
+  int order = 2;
 };
 
 int run_fit(const FitOptions& opt) {
@@ -29,8 +30,11 @@ int run_fit(const FitOptions& opt) {
       if (opt.params[j] == opt.params[i]) throw UsageError("--params: " + opt.params[i] + " given twice");
     }
   }
+  check_order(opt.order);
   const Suite suite = load_suite(opt.suite);
-  const FitResult r = fit(suite, suite_model(suite), opt.params);
+  SuiteModel model = suite_model(suite);
+  model.order = opt.order;
+  const FitResult r = fit(suite, model, opt.params);
 
   std::ostringstream out;
   out << "odomcov fit: " << suite.name << " (" << suite.experiments.size()
@@ -89,6 +93,9 @@ void setup_fit(CLI::App& app, int& exit_code) {
                   "Parameters: k_left, k_right, wheelbase, <effect>.<parameter>")
       ->required()
       ->delimiter(',');
+  cmd->add_option("--order", opt->order,
+                  "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
+      ->capture_default_str();
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
   cmd->callback([opt, &exit_code] { exit_code = run_fit(*opt); });
 }

@@ -98,6 +98,10 @@ void check_alpha(double alpha) {
   if (!(alpha > 0.0 && alpha < 1.0)) throw UsageError("--alpha must be in (0, 1)");
 }
 
+void check_order(int order) {
+  if (order != 1 && order != 2) throw UsageError("--order must be 1 or 2");
+}
+
 void check_threads(int threads) {
   if (threads < 0) throw UsageError("--threads must be >= 0 (0 = all cores)");
 }

@@ -45,6 +45,8 @@ void check_output_dir(const std::string& dir);
 
 /// Usage checks shared by the subcommands: --alpha in (0, 1), --threads >= 0.
 void check_alpha(double alpha);
+/// --order must be 1 (first order) or 2 (the order-2 model).
+void check_order(int order);
 void check_threads(int threads);
 
 /// Writes `text` to `path` via a temporary file and rename.

@@ -1,4 +1,5 @@
-// odomcov run CONFIG [--runs N] [--seed S] [--threads T] [--alpha A] [--check] [--json FILE]
+// odomcov run CONFIG [--runs N] [--seed S] [--threads T] [--alpha A] [--order 1|2] [--check]
+//             [--json FILE]
 // Monte-Carlo against theory, reported as in [Kleeman95] §7.
 #include <cmath>
 #include <iostream>
@@ -23,7 +24,13 @@ struct RunOptions {
   bool check = false;
   std::string json;
   std::int64_t samples = 0;
+  int order = 1;
 };
+
+std::string cov_test_name(int order) {
+  return order == 2 ? "covariance (ADF [Browne84]):              "
+                    : "covariance (LRT, Bartlett-corrected):     ";
+}
 
 /// At most this many end-point errors go into the JSON (a scatter plot needs far fewer).
 constexpr std::int64_t kMaxJsonSamples = 100'000;
@@ -60,20 +67,31 @@ std::string report(const Config& config, const Validation& v, int threads) {
       << moments_text(v.theory_mean, v.theory_cov) << "\n====== tests (alpha = " << v.alpha
       << ")\n"
       << "  mean (chi^2, theory covariance):          " << test_text(v.mean_test) << "\n"
-      << "  covariance (LRT, Bartlett-corrected):     " << test_text(v.cov_test) << "\n"
+      << "  " << cov_test_name(v.order) << test_text(v.cov_test) << "\n"
       << "  mean NEES:                                " << fixed(v.nees_mean, 4)
       << " (expected 3)\n"
-      << "verdict: " << v.verdict << "\n\n"
+      << "verdict: " << v.verdict << " (order " << v.order << ")\n\n";
+  const OrderResult& o = v.other;
+  out << "The other order (information, not part of the verdict): " << o.theory_source << "\n"
+      << moments_text(o.theory_mean, o.theory_cov)
+      << "  mean (chi^2, theory covariance):          " << test_text(o.mean_test) << "\n"
+      << "  " << cov_test_name(o.order) << test_text(o.cov_test) << "\n";
+  if (o.order == 2) {
+    out << "  covariance (LRT, Gaussian, for reference): " << test_text(o.cov_lrt) << "\n";
+  }
+  out << "  mean NEES: " << fixed(o.nees_mean, 4) << "; verdict (order " << o.order
+      << "): " << o.verdict << "\n\n"
       << "Beyond the continuous first-order theory (information, not part of the verdict):\n"
       << "  noise-induced mean (exact for the Gaussian heading error of white wheel noise):\n"
       << "    (" << sci(v.noise_induced_mean.x(), 4) << ", " << sci(v.noise_induced_mean.y(), 4)
       << ", 0); mean test against theory + it: " << test_text(v.noise_induced_mean_test) << "\n"
       << "  per-sample first-order covariance [Wang88] (noise lumped per sample):\n";
   if (v.sampled_cov_test.valid) {
+    const Matrix3& closed = v.order == 1 ? v.theory_cov : v.other.theory_cov;
     out << "    std-dev ratio to the closed form ("
-        << fixed(std::sqrt(v.sampled_cov(0, 0) / v.theory_cov(0, 0)), 4) << ", "
-        << fixed(std::sqrt(v.sampled_cov(1, 1) / v.theory_cov(1, 1)), 4) << ", "
-        << fixed(std::sqrt(v.sampled_cov(2, 2) / v.theory_cov(2, 2)), 4)
+        << fixed(std::sqrt(v.sampled_cov(0, 0) / closed(0, 0)), 4) << ", "
+        << fixed(std::sqrt(v.sampled_cov(1, 1) / closed(1, 1)), 4) << ", "
+        << fixed(std::sqrt(v.sampled_cov(2, 2) / closed(2, 2)), 4)
         << "); covariance test against it: " << test_text(v.sampled_cov_test) << "\n";
   } else {
     out << "    not available with model effects\n";
@@ -85,6 +103,7 @@ int run_run(const RunOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
   check_alpha(opt.alpha);
   check_threads(opt.threads);
+  check_order(opt.order);
   if (opt.samples < 0 || opt.samples > kMaxJsonSamples) {
     throw UsageError("--samples must be in [0, " + std::to_string(kMaxJsonSamples) + "]");
   }
@@ -98,7 +117,7 @@ int run_run(const RunOptions& opt) {
   Progress progress;
   ProgressBar bar([&progress] { return progress.runs_done.load(); }, config.simulation.runs,
                   "runs");
-  const Validation v = validate(config, opt.alpha, opt.threads, &progress, opt.samples);
+  const Validation v = validate(config, opt.alpha, opt.threads, &progress, opt.samples, opt.order);
   bar.finish();
 
   std::cout << report(config, v, opt.threads);
@@ -117,8 +136,20 @@ int run_run(const RunOptions& opt) {
 
 }  // namespace
 
+json order_json(const OrderResult& o) {
+  json tests = {{"mean", test_json(o.mean_test)}, {"covariance", test_json(o.cov_test)}};
+  if (o.order == 2) tests["covariance_lrt"] = test_json(o.cov_lrt);
+  return {{"theory", moments_json(o.theory_mean, o.theory_cov)},
+          {"source", o.theory_source},
+          {"tests", tests},
+          {"nees_mean", o.nees_mean},
+          {"verdict", o.verdict}};
+}
+
 json validation_json(const std::string& name, const Validation& v) {
   return {{"name", name},
+          {"order", v.order},
+          {"order_" + std::to_string(v.other.order), order_json(v.other)},
           {"runs", v.runs},
           {"seed", v.seed},
           {"alpha", v.alpha},
@@ -143,6 +174,10 @@ void setup_run(CLI::App& app, int& exit_code) {
   cmd->add_option("--threads", opt->threads, "Worker threads; 0 = all cores")
       ->capture_default_str();
   cmd->add_option("--alpha", opt->alpha, "Significance level of the tests")
+      ->capture_default_str();
+  cmd->add_option("--order", opt->order,
+                  "Model order of the theory and verdict: 1 = first-order closed form, 2 = exact "
+                  "Gaussian-heading moments with the ADF covariance test (docs/orders.md)")
       ->capture_default_str();
   cmd->add_flag("--check", opt->check, "Exit with code 1 when the verdict is inconsistent");
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");

@@ -1,4 +1,5 @@
-// odomcov sweep SWEEP.yaml [--out CSV] [--shard I/N] [--threads T] [--alpha A] [--json FILE]
+// odomcov sweep SWEEP.yaml [--out CSV] [--shard I/N] [--threads T] [--alpha A] [--order 1|2]
+//               [--json FILE]
 // One Monte-Carlo validation per grid point, one CSV row each (SPEC "Sweep file").
 #include <csignal>
 #include <fstream>
@@ -20,6 +21,7 @@ struct SweepOptions {
   std::string shard = "1/1";
   int threads = 0;
   double alpha = kDefaultAlpha;
+  int order = 1;
   std::string json;
 };
 
@@ -57,6 +59,7 @@ int run_sweep(const SweepOptions& opt) {
   const auto [shard, shards] = parse_shard(opt.shard);
   check_alpha(opt.alpha);
   check_threads(opt.threads);
+  check_order(opt.order);
   if (!opt.out.empty()) check_output_path(opt.out);
   if (!opt.json.empty()) check_output_path(opt.json);
   const SweepPlan plan = load_sweep(opt.sweep);  // validates every point
@@ -100,7 +103,7 @@ int run_sweep(const SweepOptions& opt) {
     const Config& config = configs[k];
     progress.runs_done = 0;
     current_samples = sample_count(config.path);
-    const Validation v = validate(config, opt.alpha, opt.threads, &progress);
+    const Validation v = validate(config, opt.alpha, opt.threads, &progress, 0, opt.order);
     if (g_interrupted.load()) break;  // the cancelled point is incomplete: no row
     csv << csv_row(plan, points[k], v) << std::flush;
     steps_done += config.simulation.runs * current_samples.load();
@@ -135,6 +138,7 @@ int run_sweep(const SweepOptions& opt) {
                                  {"base", plan.base_file},
                                  {"shard", opt.shard},
                                  {"alpha", opt.alpha},
+                                 {"order", opt.order},
                                  {"rows", rows}});
   }
   return kExitOk;
@@ -153,6 +157,10 @@ void setup_sweep(CLI::App& app, int& exit_code) {
   cmd->add_option("--threads", opt->threads, "Worker threads; 0 = all cores")
       ->capture_default_str();
   cmd->add_option("--alpha", opt->alpha, "Significance level of the tests")
+      ->capture_default_str();
+  cmd->add_option("--order", opt->order,
+                  "Model order of the CSV columns and verdicts (1 or 2); every point's JSON has "
+                  "both orders")
       ->capture_default_str();
   cmd->add_option("--json", opt->json, "Also write every point's run JSON to this file");
   cmd->callback([opt, &exit_code] { exit_code = run_sweep(*opt); });
