@@ -282,6 +282,11 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     }
   }
   d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, alpha)) : d.before;
+  d.explained = d.after.verdict == "consistent";
+  if (!d.explained) {
+    const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
+    d.residuals = residual_alignment(suite, final_model, residuals(suite, final_model));
+  }
   return d;
 }
 
@@ -309,6 +314,36 @@ std::string explain(const Candidate& c) {
     }
   }
   if (!c.note.empty()) text += " [" + c.note + "]";
+  return text;
+}
+
+std::string verdict_text(const Diagnosis& d) {
+  if (d.explained) {
+    return std::string(d.best ? "With it the model is consistent with the data"
+                              : "No candidate is significant, and the model is consistent with the "
+                                "data") +
+           " (compare at alpha = " + format_number(d.alpha, "%.3g") + "): it explains them.\n";
+  }
+  std::string text = d.best ? "Even with it, the model is still inconsistent with the data"
+                            : "No candidate is significant, but the model is still inconsistent "
+                              "with the data";
+  text += " (compare at alpha = " + format_number(d.alpha, "%.3g") + ", NEES mean " +
+          format_number(d.after.nees_mean, "%.3g") +
+          " against 3): something the candidates do not cover is missing.\n";
+  std::size_t shown = 0;
+  for (const ResidualAlignment& a : d.residuals) {
+    if (!a.testable || shown == 3) break;
+    if (shown == 0) {
+      text += a.p_value < d.alpha
+                  ? "The remaining misfit lines up with (p family-wise over the features):\n"
+                  : "The remaining misfit lines up with no path feature at alpha; the closest "
+                    "(p family-wise over the features):\n";
+    }
+    if (shown > 0 && !(a.p_value < d.alpha)) break;
+    text += "  " + a.feature + " (p = " + format_number(a.p_value, "%.2g") + "): " + a.description + "\n";
+    ++shown;
+  }
+  if (shown == 0) text += "No path feature varies across the experiments enough to test.\n";
   return text;
 }
 

@@ -1,6 +1,7 @@
 // diagnose: which physical effect is the model missing? Every candidate is fitted by maximum
 // likelihood; the best is named when it is significant after the multiple-comparison
-// correction, otherwise the answer is that the model already explains the data.
+// correction. The verdict is honest: the data are "explained" only when compare finds the final
+// model consistent; otherwise diagnose says what the remaining misfit lines up with.
 #pragma once
 
 #include <optional>
@@ -10,6 +11,7 @@
 
 #include "odomcov/calibration.hpp"
 #include "odomcov/comparison.hpp"
+#include "odomcov/residual_features.hpp"
 
 namespace odomcov {
 
@@ -56,6 +58,12 @@ struct Diagnosis {
   ModelSummary after;                 // with the best added (= before when none)
   TestResult kurtosis;                // the shape test that separates bumps from noise level
   bool heavy_tails = false;
+  /// True only when the final model (the best candidate's when one is named, else the suite's)
+  /// is consistent with the data at alpha, as compare judges it.
+  bool explained = false;
+  /// What the final model's misfit lines up with, best first (residual_alignment); filled
+  /// whenever explained is false.
+  std::vector<ResidualAlignment> residuals;
 };
 
 /// Runs every candidate (all catalogue effects not in the model plus wheel_noise_level, or the
@@ -80,5 +88,10 @@ std::string explain(const Candidate& c);
 
 /// The YAML to paste: an effect for model.effects, or the robot line for wheel_noise_level.
 std::string candidate_yaml(const Candidate& c, const SuiteModel& model);
+
+/// The closing words of diagnose's report: "explained" only when it is; otherwise that the
+/// model is still inconsistent and the features the misfit lines up with (at most three),
+/// with their p-values and what kind of effect each points at.
+std::string verdict_text(const Diagnosis& d);
 
 }  // namespace odomcov

@@ -60,14 +60,13 @@ int run_diagnose(const DiagnoseOptions& opt) {
   if (d.best) {
     const Candidate& b = d.candidates[*d.best];
     out << "\nMissing: " << explain(b) << "\n"
-        << "Add it to the suite:\n" << (b.effect == kWheelNoiseLevel ? "  " : "  model:\n    effects:\n      ")
-        << candidate_yaml(b, model) << "\n"
-        << "or the whole model, every effect refitted with it:\n" << model_yaml(b.model)
+        << "Adopt it: replace the suite's robot line and its model block (if any) with these, "
+           "every effect refitted with the new one:\n"
+        << model_yaml(b.model)
         << "after: log-likelihood " << fixed(d.after.log_likelihood, 2) << ", NEES mean "
         << fixed(d.after.nees_mean, 3) << ", " << d.after.verdict << "\n";
-  } else {
-    out << "\nNo candidate is significant: the model already explains your data.\n";
   }
+  out << "\n" << verdict_text(d);
   std::cout << out.str();
 
   if (!opt.json.empty()) {
@@ -96,16 +95,29 @@ int run_diagnose(const DiagnoseOptions& opt) {
       best = {{"effect", b.effect}, {"parameters", values_json(b, b.values)}};
       after["yaml"] = model_yaml(b.model);
     }
+    json residuals = json::array();
+    for (const ResidualAlignment& a : d.residuals) {
+      residuals.push_back({{"feature", a.feature},
+                           {"p_value", a.testable ? json(a.p_value) : json(nullptr)},
+                           {"p_value_raw", a.testable ? json(a.p_value_raw) : json(nullptr)},
+                           {"statistic", a.testable ? json(a.statistic) : json(nullptr)},
+                           {"dof", {a.dof1, a.dof2}},
+                           {"testable", a.testable},
+                           {"description", a.description}});
+    }
     json kurtosis = test_json(d.kurtosis);
     kurtosis["heavy_tails"] = d.heavy_tails;
-    write_json_atomic(opt.json, {{"suite", suite.name},
-                                 {"alpha", d.alpha},
-                                 {"runs", d.runs},
-                                 {"before", summary_json(d.before)},
-                                 {"kurtosis", kurtosis},
-                                 {"candidates", candidates},
-                                 {"best", best},
-                                 {"after", after}});
+    json report = {{"suite", suite.name},
+                   {"alpha", d.alpha},
+                   {"runs", d.runs},
+                   {"before", summary_json(d.before)},
+                   {"kurtosis", kurtosis},
+                   {"candidates", candidates},
+                   {"best", best},
+                   {"after", after},
+                   {"explained", d.explained}};
+    if (!d.explained) report["residuals"] = residuals;  // the SPEC: there whenever not explained
+    write_json_atomic(opt.json, report);
   }
   return kExitOk;
 }
