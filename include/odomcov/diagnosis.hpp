@@ -4,6 +4,8 @@
 // model consistent; otherwise diagnose says what the remaining misfit lines up with.
 #pragma once
 
+#include <atomic>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <utility>
@@ -78,8 +80,16 @@ struct Diagnosis {
 /// first. One signature rule settles the pair a Gaussian likelihood cannot tell apart: bumps and
 /// wheel_noise_level both add variance that grows with distance, so heavy tails (Mardia's
 /// kurtosis, shape only) put bumps ahead of wheel_noise_level and Gaussian tails the reverse.
+///
+/// `progress`, when given, is kept up to date for a progress display (the library prints
+/// nothing): the number of fits to run and done, and the likelihood evaluations so far.
+struct DiagnoseProgress {
+  std::atomic<std::int64_t> fits_total{0};
+  std::atomic<std::int64_t> fits_done{0};
+  std::atomic<std::int64_t> evaluations{0};
+};
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
-                   const std::vector<std::string>& only = {});
+                   const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr);
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts

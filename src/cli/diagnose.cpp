@@ -7,6 +7,7 @@
 #include "commands.hpp"
 #include "odomcov/diagnosis.hpp"
 #include "output.hpp"
+#include "progress.hpp"
 
 namespace odomcov::cli {
 namespace {
@@ -38,7 +39,12 @@ int run_diagnose(const DiagnoseOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
   const SuiteModel model = suite_model(suite);
-  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects);
+  DiagnoseProgress progress;
+  ProgressBar bar([&progress] { return progress.fits_done.load(); },
+                  std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
+                  "fits");
+  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress);
+  bar.finish();
 
   std::ostringstream out;
   out << "odomcov diagnose: " << suite.name << " (" << d.runs << " runs), family-wise alpha = "

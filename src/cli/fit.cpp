@@ -8,6 +8,7 @@
 #include "odomcov/calibration.hpp"
 #include "odomcov/error.hpp"
 #include "output.hpp"
+#include "progress.hpp"
 
 namespace odomcov::cli {
 namespace {
@@ -30,7 +31,12 @@ int run_fit(const FitOptions& opt) {
     }
   }
   const Suite suite = load_suite(opt.suite);
-  const FitResult r = fit(suite, suite_model(suite), opt.params);
+  std::atomic<std::int64_t> evaluations{0};
+  ProgressBar bar([&evaluations] { return evaluations.load(); },
+                  std::function<std::int64_t()>([] { return std::int64_t{0}; }),
+                  "likelihood evaluations");
+  const FitResult r = fit(suite, suite_model(suite), opt.params, Likelihood::full, &evaluations);
+  bar.finish();
 
   std::ostringstream out;
   out << "odomcov fit: " << suite.name << " (" << suite.experiments.size()
