@@ -120,7 +120,8 @@ def loop(odomcov, suite, out, rounds):
     work = os.path.join(out, "suite.yaml")
     copy_suite(suite, work)
     report = {"suite": suite, "compare_before": compare(odomcov, work, os.path.join(out, "compare-before.json")),
-              "rounds": [], "fit": None, "compare_fit": None}
+              "rounds": [], "fit": None, "compare_fit": None,
+              "compare_rounds": [os.path.join(out, "compare-before.json")]}
     named = []
     for round_ in range(rounds):
         path = os.path.join(out, f"diagnose-{round_}.json")
@@ -146,6 +147,10 @@ def loop(odomcov, suite, out, rounds):
             "explanation": candidate["explanation"], "explained": d.get("explained")})
         named.append(best)
         set_model(work, d["after"]["yaml"])
+        # The compare of each round's model, for scripts/plot_loop.py.
+        path = os.path.join(out, f"compare-round-{round_ + 1}.json")
+        compare(odomcov, work, path)
+        report["compare_rounds"].append(path)
     progress("diagnose loop: compare and the joint fit")
     report["compare_after"] = compare(odomcov, work, os.path.join(out, "compare-after.json"))
     if named:
