@@ -132,6 +132,7 @@ def loop(odomcov, suite, out, rounds):
             d = json.load(f)
         report["explained"] = d.get("explained")
         report["alpha"] = d.get("alpha", 0.01)
+        report["odometry_correction"] = d.get("odometry_correction")
         report["residuals"] = d.get("residuals")
         if d["best"] is None:
             report["rounds"].append({"round": round_, "named": None, "before": d["before"],
@@ -203,6 +204,24 @@ def verdict_lines(report, top=3):
     return lines
 
 
+def correction_lines(report):
+    """The odometry corrected by the named systematic effects, UMBmark-style."""
+    c = report.get("odometry_correction")
+    if not c:
+        return []
+    lines = [f"- Corrected odometry: wheelbase {c['wheelbase']:.6g} m, wheel scales left "
+             f"{c['scale_left']:.6g}, right {c['scale_right']:.6g}. End-pose x-y error with the "
+             "runs re-integrated, before → after:",
+             "",
+             "| kind | runs | mean \\|xy\\| [mm] | Emax,sys [mm] |",
+             "|---|---|---|---|"]
+    for k in c["by_kind"]:
+        lines.append(f"| {k['kind']} | {k['runs']} | {1e3 * k['mean_xy_before']:.1f} → "
+                     f"{1e3 * k['mean_xy_after']:.1f} | {1e3 * k['emax_sys_before']:.1f} → "
+                     f"{1e3 * k['emax_sys_after']:.1f} |")
+    return lines
+
+
 def markdown(report):
     rows = ["| round | named | size (all effects refitted) | p-value | log-likelihood | NEES mean | verdict | explained |",
             "|---|---|---|---|---|---|---|---|"]
@@ -228,6 +247,7 @@ def markdown(report):
         rows.append(f"- Joint fit of everything named, full likelihood: {values}.")
         rows.append(f"- `compare` with the joint fit: {summary(report['compare_fit'])}.")
     rows.extend(verdict_lines(report))
+    rows.extend(correction_lines(report))
     held = report.get("holdout")
     if held:
         rows.append(f"- Held-out runs ({held['suite']}) with the suite's original model: "

@@ -289,6 +289,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   if (progress) progress->fits_done = progress->fits_total.load();
   d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, alpha)) : d.before;
   d.explained = d.after.verdict == "consistent";
+  d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
   if (!d.explained) {
     const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
     d.residuals = residual_alignment(suite, final_model, residuals(suite, final_model));
@@ -334,8 +335,9 @@ std::string verdict_text(const Diagnosis& d) {
                             : "No candidate is significant, but the model is still inconsistent "
                               "with the data";
   text += " (compare at alpha = " + format_number(d.alpha, "%.3g") + ", NEES mean " +
-          format_number(d.after.nees_mean, "%.3g") +
-          " against 3): something the candidates do not cover is missing.\n";
+          format_number(d.after.nees_mean, "%.3g") + " against 3): " +
+          (d.best ? "adopt it and run diagnose again for the next effect.\n"
+                  : "something the candidates do not cover is missing.\n");
   std::size_t shown = 0;
   for (const ResidualAlignment& a : d.residuals) {
     if (!a.testable || shown == 3) break;

@@ -13,6 +13,7 @@
 
 #include "odomcov/calibration.hpp"
 #include "odomcov/comparison.hpp"
+#include "odomcov/odometry_correction.hpp"
 #include "odomcov/residual_features.hpp"
 
 namespace odomcov {
@@ -66,6 +67,9 @@ struct Diagnosis {
   /// What the final model's misfit lines up with, best first (residual_alignment); filled
   /// whenever explained is false.
   std::vector<ResidualAlignment> residuals;
+  /// The corrected odometry the final model's systematic effects imply, with the runs'
+  /// end-pose error re-integrated before and after (none without such effects).
+  std::optional<OdometryCorrection> odometry_correction;
 };
 
 /// Runs every candidate (all catalogue effects not in the model plus wheel_noise_level, or the

@@ -6,6 +6,7 @@
 
 #include "commands.hpp"
 #include "odomcov/diagnosis.hpp"
+#include "odomcov/format.hpp"
 #include "output.hpp"
 #include "progress.hpp"
 
@@ -73,6 +74,28 @@ int run_diagnose(const DiagnoseOptions& opt) {
         << fixed(d.after.nees_mean, 3) << ", " << d.after.verdict << "\n";
   }
   out << "\n" << verdict_text(d);
+  json correction = nullptr;
+  if (d.odometry_correction) {
+    const OdometryCorrection& c = *d.odometry_correction;
+    out << "\nThe odometry corrected by the model's systematic effects (UMBmark-style): wheelbase "
+        << format_number(c.wheelbase_m, "%.6g") << " m, wheel scales left "
+        << format_number(c.scale_left, "%.6g") << ", right " << format_number(c.scale_right, "%.6g")
+        << " (multiply each wheel's diameter by its scale).\n"
+        << "End-pose x-y error with the runs re-integrated, before and after [mm]:\n"
+        << "  kind          runs  mean before  mean after  Emax before  Emax after\n";
+    json kinds = json::array();
+    for (const CorrectionByKind& k : c.by_kind) {
+      char line[200];
+      std::snprintf(line, sizeof line, "  %-12s %5zu %12.1f %11.1f %12.1f %11.1f\n", k.kind.c_str(), k.runs, 1e3 * k.mean_xy_before_m, 1e3 * k.mean_xy_after_m,
+                    1e3 * k.emax_before_m, 1e3 * k.emax_after_m);
+      out << line;
+      kinds.push_back({{"kind", k.kind}, {"runs", k.runs}, {"mean_xy_before", k.mean_xy_before_m},
+                       {"mean_xy_after", k.mean_xy_after_m}, {"emax_sys_before", k.emax_before_m},
+                       {"emax_sys_after", k.emax_after_m}});
+    }
+    correction = {{"wheelbase", c.wheelbase_m}, {"scale_left", c.scale_left},
+                  {"scale_right", c.scale_right}, {"by_kind", kinds}};
+  }
   std::cout << out.str();
 
   if (!opt.json.empty()) {
@@ -121,7 +144,8 @@ int run_diagnose(const DiagnoseOptions& opt) {
                    {"candidates", candidates},
                    {"best", best},
                    {"after", after},
-                   {"explained", d.explained}};
+                   {"explained", d.explained},
+                   {"odometry_correction", correction}};
     if (!d.explained) report["residuals"] = residuals;  // the SPEC: there whenever not explained
     write_json_atomic(opt.json, report);
   }
