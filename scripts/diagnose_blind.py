@@ -143,6 +143,9 @@ def evaluate(odomcov, directory, index, rng, hidden):
     result = {"world": index, "hidden": sorted(hidden), "named": named,
               "identified": sorted(named) == sorted(hidden), "recovered": None,
               "consistent": report["compare_after"]["verdict"] == "consistent" if named else None,
+              "explained": report.get("explained"),
+              "residuals": [(r["feature"], r["p_value"]) for r in report.get("residuals") or []
+                            if r.get("p_value") is not None][:3],
               "params": {}}
     if result["identified"] and named:
         # The loop's final joint fit of everything named: the truth within 3 SE.

@@ -120,15 +120,23 @@ def loop(odomcov, suite, out, rounds):
     work = os.path.join(out, "suite.yaml")
     copy_suite(suite, work)
     report = {"suite": suite, "compare_before": compare(odomcov, work, os.path.join(out, "compare-before.json")),
-              "rounds": [], "fit": None, "compare_fit": None}
+              "rounds": [], "fit": None, "compare_fit": None,
+              "compare_rounds": [os.path.join(out, "compare-before.json")]}
     named = []
     for round_ in range(rounds):
         path = os.path.join(out, f"diagnose-{round_}.json")
+        progress(f"diagnose loop: round {round_ + 1} of at most {rounds} "
+                 f"({len(named)} named so far{': ' + ', '.join(named) if named else ''})")
         run([odomcov, "diagnose", work, "--json", path])
         with open(path) as f:
             d = json.load(f)
+        report["explained"] = d.get("explained")
+        report["alpha"] = d.get("alpha", 0.01)
+        report["odometry_correction"] = d.get("odometry_correction")
+        report["residuals"] = d.get("residuals")
         if d["best"] is None:
-            report["rounds"].append({"round": round_, "named": None, "before": d["before"]})
+            report["rounds"].append({"round": round_, "named": None, "before": d["before"],
+                                     "explained": d.get("explained")})
             break
         best = d["best"]["effect"]
         candidate = next(c for c in d["candidates"] if c["effect"] == best)
@@ -137,9 +145,14 @@ def loop(odomcov, suite, out, rounds):
             "stderr": candidate["stderr"], "p_value": candidate["p_value"],
             "delta_log_likelihood": candidate["delta_log_likelihood"],
             "likelihood": candidate["likelihood"], "before": d["before"], "after": d["after"],
-            "explanation": candidate["explanation"]})
+            "explanation": candidate["explanation"], "explained": d.get("explained")})
         named.append(best)
         set_model(work, d["after"]["yaml"])
+        # The compare of each round's model, for scripts/plot_loop.py.
+        path = os.path.join(out, f"compare-round-{round_ + 1}.json")
+        compare(odomcov, work, path)
+        report["compare_rounds"].append(path)
+    progress("diagnose loop: compare and the joint fit")
     report["compare_after"] = compare(odomcov, work, os.path.join(out, "compare-after.json"))
     if named:
         path = os.path.join(out, "fit.json")
@@ -151,7 +164,18 @@ def loop(odomcov, suite, out, rounds):
         copy_suite(work, fitted)
         set_model(fitted, report["fit"]["yaml"])
         report["compare_fit"] = compare(odomcov, fitted, os.path.join(out, "compare-fit.json"))
+    progress("")
     return report
+
+
+def _yes_no(flag):
+    return "" if flag is None else ("yes" if flag else "no")
+
+
+def progress(text):
+    """One line of per-round progress on stderr when it is a terminal."""
+    if sys.stderr.isatty():
+        print(f"\r\033[K{text}", end="", file=sys.stderr, flush=True)
 
 
 def summary(c):
@@ -160,20 +184,60 @@ def summary(c):
             f"{c['verdict']}")
 
 
+def verdict_lines(report, top=3):
+    """The loop's honest ending: explained or not, and what the misfit lines up with."""
+    if report.get("explained") is None:
+        return []
+    if report["explained"]:
+        return ["- Verdict: **explained**: the final model is consistent with the data."]
+    lines = ["- Verdict: **not explained**: the final model is still inconsistent with the data."]
+    testable = [r for r in report.get("residuals") or [] if r.get("p_value") is not None]
+    alpha = report.get("alpha", 0.01)
+    aligned = [r for r in testable if r["p_value"] < alpha][:top]
+    if aligned:
+        lines.append("  The remaining misfit lines up with (p family-wise over the features):")
+    elif testable:
+        lines.append("  The remaining misfit lines up with no path feature at alpha; the closest:")
+        aligned = testable[:1]
+    for r in aligned:
+        lines.append(f"  - {r['feature']}: p = {r['p_value']:.2g}: {r['description']}")
+    return lines
+
+
+def correction_lines(report):
+    """The odometry corrected by the named systematic effects, UMBmark-style."""
+    c = report.get("odometry_correction")
+    if not c:
+        return []
+    lines = [f"- Corrected odometry: wheelbase {c['wheelbase']:.6g} m, wheel scales left "
+             f"{c['scale_left']:.6g}, right {c['scale_right']:.6g}. End-pose x-y error with the "
+             "runs re-integrated, before → after:",
+             "",
+             "| kind | runs | mean \\|xy\\| [mm] | Emax,sys [mm] |",
+             "|---|---|---|---|"]
+    for k in c["by_kind"]:
+        lines.append(f"| {k['kind']} | {k['runs']} | {1e3 * k['mean_xy_before']:.1f} → "
+                     f"{1e3 * k['mean_xy_after']:.1f} | {1e3 * k['emax_sys_before']:.1f} → "
+                     f"{1e3 * k['emax_sys_after']:.1f} |")
+    return lines
+
+
 def markdown(report):
-    rows = ["| round | named | size (all effects refitted) | p-value | log-likelihood | NEES mean | verdict |",
-            "|---|---|---|---|---|---|---|"]
+    rows = ["| round | named | size (all effects refitted) | p-value | log-likelihood | NEES mean | verdict | explained |",
+            "|---|---|---|---|---|---|---|---|"]
     first = report["compare_before"]
     rows.append(f"| 0 | (the suite's model) | | | {first['log_likelihood']:.1f} | "
-                f"{first['nees_mean']:.2f} | {first['verdict']} |")
+                f"{first['nees_mean']:.2f} | {first['verdict']} | |")
     for s in report["rounds"]:
         if s["named"] is None:
-            rows.append(f"| {s['round'] + 1} | nothing significant | | | | | |")
+            rows.append(f"| {s['round'] + 1} | nothing significant | | | | | | "
+                        f"{_yes_no(s.get('explained'))} |")
             continue
         values = ", ".join(f"{k} = {v:.5g}" for k, v in s["parameters"].items())
         a = s["after"]
         rows.append(f"| {s['round'] + 1} | {s['named']} | {values} | {s['p_value']:.2g} | "
-                    f"{a['log_likelihood']:.1f} | {a['nees_mean']:.2f} | {a['verdict']} |")
+                    f"{a['log_likelihood']:.1f} | {a['nees_mean']:.2f} | {a['verdict']} | "
+                    f"{_yes_no(s.get('explained'))} |")
     rows.append("")
     rows.append(f"- `compare` with the loop's model: {summary(report['compare_after'])}.")
     fit = report["fit"]
@@ -182,6 +246,8 @@ def markdown(report):
                            for k, v in fit["parameters"].items())
         rows.append(f"- Joint fit of everything named, full likelihood: {values}.")
         rows.append(f"- `compare` with the joint fit: {summary(report['compare_fit'])}.")
+    rows.extend(verdict_lines(report))
+    rows.extend(correction_lines(report))
     held = report.get("holdout")
     if held:
         rows.append(f"- Held-out runs ({held['suite']}) with the suite's original model: "

@@ -127,7 +127,8 @@ double likelihood_of(const Suite& suite, const SuiteModel& model, Likelihood kin
 /// Each run's term of the log-likelihood at the coordinates u.
 std::vector<double> run_terms(const Suite& suite, SuiteModel& model,
                               const std::vector<Handle>& handles, const double* u,
-                              Likelihood kind) {
+                              Likelihood kind, std::atomic<std::int64_t>* counter = nullptr) {
+  if (counter) ++*counter;
   apply(model, handles, u);
   return run_log_likelihoods(residuals(suite, model), kind == Likelihood::scatter);
 }
@@ -141,8 +142,8 @@ double negative_sum(const std::vector<double>& terms) {
 
 double negative_log_likelihood(const Suite& suite, SuiteModel& model,
                                const std::vector<Handle>& handles, const double* u,
-                               Likelihood kind) {
-  return negative_sum(run_terms(suite, model, handles, u, kind));
+                               Likelihood kind, std::atomic<std::int64_t>* counter = nullptr) {
+  return negative_sum(run_terms(suite, model, handles, u, kind, counter));
 }
 
 }  // namespace
@@ -163,7 +164,7 @@ std::string check_fit_parameter(const std::string& name) {
 }
 
 FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names,
-              Likelihood likelihood) {
+              Likelihood likelihood, std::atomic<std::int64_t>* evaluations) {
   FitResult out;
   out.names = names;
   out.log_likelihood_before = likelihood_of(suite, start, likelihood);
@@ -199,7 +200,8 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
     const std::vector<Handle>* handles;
     Likelihood kind;
     int evaluations;
-  } context{&suite, &model, &handles, likelihood, 0};
+    std::atomic<std::int64_t>* counter;
+  } context{&suite, &model, &handles, likelihood, 0, evaluations};
   // BOBYQA needs two or more coordinates; one is fitted with the subplex method.
   nlopt::opt opt(n >= 2 ? nlopt::LN_BOBYQA : nlopt::LN_SBPLX, static_cast<unsigned>(n));
   opt.set_lower_bounds(lower);
@@ -212,7 +214,8 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
       [](const std::vector<double>& x, std::vector<double>&, void* data) {
         auto* c = static_cast<Context*>(data);
         ++c->evaluations;
-        return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data(), c->kind);
+        return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data(), c->kind,
+                                       c->counter);
       },
       &context);
   double best = 0.0;
@@ -240,7 +243,7 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
           std::vector<double> x = u;
           x[i] += si * h[i];
           x[j] += sj * h[j];
-          return run_terms(suite, model, handles, x.data(), likelihood);
+          return run_terms(suite, model, handles, x.data(), likelihood, evaluations);
         };
         auto at = [&](double si, double sj) { return negative_sum(terms(si, sj)); };
         if (i == j) {

@@ -71,11 +71,13 @@ FittedNames split_fitted_names(const EffectList& effects) {
 /// coordinate step: the systematic effects on the full likelihood (random ones held), then the
 /// random effects on the scatter part (systematic ones held). A random effect is thus never
 /// sized by a mean misfit, and a systematic one always sees the spread the random ones give.
-SuiteModel refit(const Suite& suite, const SuiteModel& model) {
+SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* progress) {
   const FittedNames names = split_fitted_names(model.effects);
   SuiteModel out = model;
-  if (!names.systematic.empty()) out = fit(suite, out, names.systematic, Likelihood::full).model;
-  if (!names.random.empty()) out = fit(suite, out, names.random, Likelihood::scatter).model;
+  std::atomic<std::int64_t>* counter = progress ? &progress->evaluations : nullptr;
+  if (!names.systematic.empty()) out = fit(suite, out, names.systematic, Likelihood::full, counter).model;
+  if (!names.random.empty()) out = fit(suite, out, names.random, Likelihood::scatter, counter).model;
+  if (progress) ++progress->fits_done;
   return out;
 }
 
@@ -139,7 +141,7 @@ double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
 }  // namespace
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
-                   const std::vector<std::string>& only) {
+                   const std::vector<std::string>& only, DiagnoseProgress* progress) {
   Diagnosis d;
   d.alpha = alpha;
   d.runs = run_count(suite);
@@ -152,7 +154,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   // candidate refits the model's effects of its own kind with it (systematic ones on the full
   // likelihood, random ones on the scatter part); the others stay at their refitted values.
   const FittedNames nuisance = split_fitted_names(model.effects);
-  const SuiteModel base = refit(suite, model);
+  const SuiteModel base = refit(suite, model, progress);
   const auto base_residuals = residuals(suite, base);
   const double base_full = log_likelihood(base_residuals);
   const double base_scatter = scatter_log_likelihood(base_residuals);
@@ -173,6 +175,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     names = kept;
   }
 
+  // The fits: the base refit, one per candidate and the winner's refit.
+  if (progress) progress->fits_total = static_cast<std::int64_t>(names.size()) + 2;
   const double log_runs = std::log(static_cast<double>(d.runs));
   for (const std::string& name : names) {
     Candidate c;
@@ -182,7 +186,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     const std::vector<std::string> own = fitted_names(name);
     fitted.insert(fitted.end(), own.begin(), own.end());
     const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
-    const FitResult f = fit(suite, base, fitted, kind);
+    const FitResult f = fit(suite, base, fitted, kind, progress ? &progress->evaluations : nullptr);
     // With heavy tails the observed information understates the uncertainty: sandwich SEs.
     const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
     c.model = f.model;
@@ -243,6 +247,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       if (gains[i].second > 0) c.evidence.push_back(gains[i]);
     }
     d.candidates.push_back(std::move(c));
+    if (progress) ++progress->fits_done;
   }
 
   const double per_candidate = alpha / static_cast<double>(std::max<std::size_t>(1, d.candidates.size()));
@@ -272,7 +277,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     // The model to adopt: everything refitted by its part of the likelihood, now that the new
     // effect is in (the earlier effects were sized without it).
     Candidate& best = d.candidates.front();
-    best.model = refit(suite, best.model);
+    best.model = refit(suite, best.model, progress);
     if (best.effect == kWheelNoiseLevel) {
       best.values = {best.model.robot.noise.k_left, best.model.robot.noise.k_right};
     } else {
@@ -281,7 +286,14 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       }
     }
   }
+  if (progress) progress->fits_done = progress->fits_total.load();
   d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, alpha)) : d.before;
+  d.explained = d.after.verdict == "consistent";
+  d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
+  if (!d.explained) {
+    const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
+    d.residuals = residual_alignment(suite, final_model, residuals(suite, final_model));
+  }
   return d;
 }
 
@@ -309,6 +321,37 @@ std::string explain(const Candidate& c) {
     }
   }
   if (!c.note.empty()) text += " [" + c.note + "]";
+  return text;
+}
+
+std::string verdict_text(const Diagnosis& d) {
+  if (d.explained) {
+    return std::string(d.best ? "With it the model is consistent with the data"
+                              : "No candidate is significant, and the model is consistent with the "
+                                "data") +
+           " (compare at alpha = " + format_number(d.alpha, "%.3g") + "): it explains them.\n";
+  }
+  std::string text = d.best ? "Even with it, the model is still inconsistent with the data"
+                            : "No candidate is significant, but the model is still inconsistent "
+                              "with the data";
+  text += " (compare at alpha = " + format_number(d.alpha, "%.3g") + ", NEES mean " +
+          format_number(d.after.nees_mean, "%.3g") + " against 3): " +
+          (d.best ? "adopt it and run diagnose again for the next effect.\n"
+                  : "something the candidates do not cover is missing.\n");
+  std::size_t shown = 0;
+  for (const ResidualAlignment& a : d.residuals) {
+    if (!a.testable || shown == 3) break;
+    if (shown == 0) {
+      text += a.p_value < d.alpha
+                  ? "The remaining misfit lines up with (p family-wise over the features):\n"
+                  : "The remaining misfit lines up with no path feature at alpha; the closest "
+                    "(p family-wise over the features):\n";
+    }
+    if (shown > 0 && !(a.p_value < d.alpha)) break;
+    text += "  " + a.feature + " (p = " + format_number(a.p_value, "%.2g") + "): " + a.description + "\n";
+    ++shown;
+  }
+  if (shown == 0) text += "No path feature varies across the experiments enough to test.\n";
   return text;
 }
 

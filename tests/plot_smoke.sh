@@ -9,7 +9,12 @@ rm -rf "$work" && mkdir -p "$work"
 /usr/bin/python3 "$src/scripts/plot_ellipses.py" "$work/theory.json" --run "$work/run.json" --out "$work/fig.png"
 "$odomcov" sweep "$src/tests/data/sweep/small.yaml" --out "$work/sweep.csv" --json "$work/sweep.json" > /dev/null
 /usr/bin/python3 "$src/scripts/plot_sweep.py" "$work/sweep.csv" --json "$work/sweep.json" --x path.sample_rate --out "$work/sweep.png"
-for f in fig.png sweep.png; do
+mkdir -p "$work/lab"
+"$odomcov" synth "$src/configs/worlds/standard.yaml" --out "$work/lab" > /dev/null
+/usr/bin/python3 "$src/scripts/diagnose_loop.py" --odomcov "$odomcov" "$work/lab/suite.yaml" --out "$work/loop" --rounds 2 > /dev/null
+/usr/bin/python3 "$src/scripts/plot_loop.py" "$work/loop" --out "$work/loop.png"
+/usr/bin/python3 "$src/scripts/plot_loop.py" "$work/loop" --group-by '^(line|spin)' --out "$work/loop_groups.png"
+for f in fig.png sweep.png loop.png loop_groups.png; do
   [ "$(head -c 8 "$work/$f" | od -An -tx1 | tr -d ' \n')" = "89504e470d0a1a0a" ] || { echo "FAIL: $f is not a PNG"; exit 1; }
 done
 echo ok

@@ -4,6 +4,8 @@
 
 #include <Eigen/Core>
 
+#include <atomic>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -44,8 +46,11 @@ struct FitResult {
 /// the inverse of the numerical Hessian of -log L at the optimum, by central differences with
 /// steps set to a fifth of a first estimate of each standard error; and robust ones from the
 /// sandwich with the runs' numerical scores.
+/// `evaluations`, when given, is incremented at every likelihood evaluation (for a progress
+/// display; the library itself prints nothing).
 FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names,
-              Likelihood likelihood = Likelihood::full);
+              Likelihood likelihood = Likelihood::full,
+              std::atomic<std::int64_t>* evaluations = nullptr);
 
 struct UmbmarkResult {
   double side_m = 0.0;

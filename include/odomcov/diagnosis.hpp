@@ -1,8 +1,11 @@
 // diagnose: which physical effect is the model missing? Every candidate is fitted by maximum
 // likelihood; the best is named when it is significant after the multiple-comparison
-// correction, otherwise the answer is that the model already explains the data.
+// correction. The verdict is honest: the data are "explained" only when compare finds the final
+// model consistent; otherwise diagnose says what the remaining misfit lines up with.
 #pragma once
 
+#include <atomic>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <utility>
@@ -10,6 +13,8 @@
 
 #include "odomcov/calibration.hpp"
 #include "odomcov/comparison.hpp"
+#include "odomcov/odometry_correction.hpp"
+#include "odomcov/residual_features.hpp"
 
 namespace odomcov {
 
@@ -56,6 +61,15 @@ struct Diagnosis {
   ModelSummary after;                 // with the best added (= before when none)
   TestResult kurtosis;                // the shape test that separates bumps from noise level
   bool heavy_tails = false;
+  /// True only when the final model (the best candidate's when one is named, else the suite's)
+  /// is consistent with the data at alpha, as compare judges it.
+  bool explained = false;
+  /// What the final model's misfit lines up with, best first (residual_alignment); filled
+  /// whenever explained is false.
+  std::vector<ResidualAlignment> residuals;
+  /// The corrected odometry the final model's systematic effects imply, with the runs'
+  /// end-pose error re-integrated before and after (none without such effects).
+  std::optional<OdometryCorrection> odometry_correction;
 };
 
 /// Runs every candidate (all catalogue effects not in the model plus wheel_noise_level, or the
@@ -70,8 +84,16 @@ struct Diagnosis {
 /// first. One signature rule settles the pair a Gaussian likelihood cannot tell apart: bumps and
 /// wheel_noise_level both add variance that grows with distance, so heavy tails (Mardia's
 /// kurtosis, shape only) put bumps ahead of wheel_noise_level and Gaussian tails the reverse.
+///
+/// `progress`, when given, is kept up to date for a progress display (the library prints
+/// nothing): the number of fits to run and done, and the likelihood evaluations so far.
+struct DiagnoseProgress {
+  std::atomic<std::int64_t> fits_total{0};
+  std::atomic<std::int64_t> fits_done{0};
+  std::atomic<std::int64_t> evaluations{0};
+};
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
-                   const std::vector<std::string>& only = {});
+                   const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr);
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts
@@ -80,5 +102,10 @@ std::string explain(const Candidate& c);
 
 /// The YAML to paste: an effect for model.effects, or the robot line for wheel_noise_level.
 std::string candidate_yaml(const Candidate& c, const SuiteModel& model);
+
+/// The closing words of diagnose's report: "explained" only when it is; otherwise that the
+/// model is still inconsistent and the features the misfit lines up with (at most three),
+/// with their p-values and what kind of effect each points at.
+std::string verdict_text(const Diagnosis& d);
 
 }  // namespace odomcov

@@ -6,7 +6,9 @@
 
 #include "commands.hpp"
 #include "odomcov/diagnosis.hpp"
+#include "odomcov/format.hpp"
 #include "output.hpp"
+#include "progress.hpp"
 
 namespace odomcov::cli {
 namespace {
@@ -41,7 +43,12 @@ int run_diagnose(const DiagnoseOptions& opt) {
   check_order(opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
-  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects);
+  DiagnoseProgress progress;
+  ProgressBar bar([&progress] { return progress.fits_done.load(); },
+                  std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
+                  "fits");
+  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress);
+  bar.finish();
 
   std::ostringstream out;
   out << "odomcov diagnose: " << suite.name << " (" << d.runs << " runs), family-wise alpha = "
@@ -63,13 +70,34 @@ int run_diagnose(const DiagnoseOptions& opt) {
   if (d.best) {
     const Candidate& b = d.candidates[*d.best];
     out << "\nMissing: " << explain(b) << "\n"
-        << "Add it to the suite:\n" << (b.effect == kWheelNoiseLevel ? "  " : "  model:\n    effects:\n      ")
-        << candidate_yaml(b, model) << "\n"
-        << "or the whole model, every effect refitted with it:\n" << model_yaml(b.model)
+        << "Adopt it: replace the suite's robot line and its model block (if any) with these, "
+           "every effect refitted with the new one:\n"
+        << model_yaml(b.model)
         << "after: log-likelihood " << fixed(d.after.log_likelihood, 2) << ", NEES mean "
         << fixed(d.after.nees_mean, 3) << ", " << d.after.verdict << "\n";
-  } else {
-    out << "\nNo candidate is significant: the model already explains your data.\n";
+  }
+  out << "\n" << verdict_text(d);
+  json correction = nullptr;
+  if (d.odometry_correction) {
+    const OdometryCorrection& c = *d.odometry_correction;
+    out << "\nThe odometry corrected by the model's systematic effects (UMBmark-style): wheelbase "
+        << format_number(c.wheelbase_m, "%.6g") << " m, wheel scales left "
+        << format_number(c.scale_left, "%.6g") << ", right " << format_number(c.scale_right, "%.6g")
+        << " (multiply each wheel's diameter by its scale).\n"
+        << "End-pose x-y error with the runs re-integrated, before and after [mm]:\n"
+        << "  kind          runs  mean before  mean after  Emax before  Emax after\n";
+    json kinds = json::array();
+    for (const CorrectionByKind& k : c.by_kind) {
+      char line[200];
+      std::snprintf(line, sizeof line, "  %-12s %5zu %12.1f %11.1f %12.1f %11.1f\n", k.kind.c_str(), k.runs, 1e3 * k.mean_xy_before_m, 1e3 * k.mean_xy_after_m,
+                    1e3 * k.emax_before_m, 1e3 * k.emax_after_m);
+      out << line;
+      kinds.push_back({{"kind", k.kind}, {"runs", k.runs}, {"mean_xy_before", k.mean_xy_before_m},
+                       {"mean_xy_after", k.mean_xy_after_m}, {"emax_sys_before", k.emax_before_m},
+                       {"emax_sys_after", k.emax_after_m}});
+    }
+    correction = {{"wheelbase", c.wheelbase_m}, {"scale_left", c.scale_left},
+                  {"scale_right", c.scale_right}, {"by_kind", kinds}};
   }
   std::cout << out.str();
 
@@ -99,16 +127,30 @@ int run_diagnose(const DiagnoseOptions& opt) {
       best = {{"effect", b.effect}, {"parameters", values_json(b, b.values)}};
       after["yaml"] = model_yaml(b.model);
     }
+    json residuals = json::array();
+    for (const ResidualAlignment& a : d.residuals) {
+      residuals.push_back({{"feature", a.feature},
+                           {"p_value", a.testable ? json(a.p_value) : json(nullptr)},
+                           {"p_value_raw", a.testable ? json(a.p_value_raw) : json(nullptr)},
+                           {"statistic", a.testable ? json(a.statistic) : json(nullptr)},
+                           {"dof", {a.dof1, a.dof2}},
+                           {"testable", a.testable},
+                           {"description", a.description}});
+    }
     json kurtosis = test_json(d.kurtosis);
     kurtosis["heavy_tails"] = d.heavy_tails;
-    write_json_atomic(opt.json, {{"suite", suite.name},
-                                 {"alpha", d.alpha},
-                                 {"runs", d.runs},
-                                 {"before", summary_json(d.before)},
-                                 {"kurtosis", kurtosis},
-                                 {"candidates", candidates},
-                                 {"best", best},
-                                 {"after", after}});
+    json report = {{"suite", suite.name},
+                   {"alpha", d.alpha},
+                   {"runs", d.runs},
+                   {"before", summary_json(d.before)},
+                   {"kurtosis", kurtosis},
+                   {"candidates", candidates},
+                   {"best", best},
+                   {"after", after},
+                   {"explained", d.explained},
+                   {"odometry_correction", correction}};
+    if (!d.explained) report["residuals"] = residuals;  // the SPEC: there whenever not explained
+    write_json_atomic(opt.json, report);
   }
   return kExitOk;
 }

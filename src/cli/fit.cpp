@@ -8,6 +8,7 @@
 #include "odomcov/calibration.hpp"
 #include "odomcov/error.hpp"
 #include "output.hpp"
+#include "progress.hpp"
 
 namespace odomcov::cli {
 namespace {
@@ -32,9 +33,14 @@ int run_fit(const FitOptions& opt) {
   }
   check_order(opt.order);
   const Suite suite = load_suite(opt.suite);
+  std::atomic<std::int64_t> evaluations{0};
+  ProgressBar bar([&evaluations] { return evaluations.load(); },
+                  std::function<std::int64_t()>([] { return std::int64_t{0}; }),
+                  "likelihood evaluations");
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
-  const FitResult r = fit(suite, model, opt.params);
+  const FitResult r = fit(suite, model, opt.params, Likelihood::full, &evaluations);
+  bar.finish();
 
   std::ostringstream out;
   out << "odomcov fit: " << suite.name << " (" << suite.experiments.size()

@@ -15,6 +15,10 @@ class ProgressBar {
  public:
   /// `done` is polled every 200 ms; `total` is the amount of work; `unit` labels it.
   ProgressBar(std::function<std::int64_t()> done, std::int64_t total, std::string unit);
+  /// For work whose amount is learnt as it goes (polled like `done`); while it is <= 0 the bar
+  /// shows a counter and the elapsed time instead.
+  ProgressBar(std::function<std::int64_t()> done, std::function<std::int64_t()> total,
+              std::string unit);
   ~ProgressBar();
   ProgressBar(const ProgressBar&) = delete;
   ProgressBar& operator=(const ProgressBar&) = delete;
@@ -29,7 +33,7 @@ class ProgressBar {
   void draw(std::int64_t done, double elapsed_s);
 
   std::function<std::int64_t()> done_;
-  std::int64_t total_;
+  std::function<std::int64_t()> total_;
   std::string unit_;
   std::atomic<bool> stop_{false};
   bool drawn_ = false;
