@@ -2,7 +2,7 @@
 # Benchmark of `odomcov diagnose` on blind worlds (issue 7): the identification rate over a mixed
 # batch of 110 worlds (each effect alone, a wrong noise level, pairs of effects, nothing hidden)
 # and the false-alarm rate over 200 worlds with nothing hidden. Seeds are fixed, so the figures
-# in results/diagnose/ are reproducible; about a minute on two cores. These seeds were fixed
+# in results/diagnose/ are reproducible; a few minutes on two cores. These seeds were fixed
 # after the method was final: the batches used while developing it (seeds 11, 2027, 90210,
 # 31337, 555) are not the ones reported.
 set -euo pipefail
