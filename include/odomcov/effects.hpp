@@ -1,4 +1,4 @@
-// Physical effects (../shared/SPEC.md, "Effect catalogue"): what a real robot does beyond white
+// Physical effects (docs/formats.md, "Effect catalogue"): what a real robot does beyond white
 // wheel noise. Each effect has a world side (the simulator's exact perturbation) and a model
 // side (its first-order contribution to the predicted mean and covariance). The catalogue and
 // its implementations live in src/effects/, one file per effect.

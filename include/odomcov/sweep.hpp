@@ -1,4 +1,4 @@
-// Parameter sweeps (../shared/SPEC.md, "Sweep file"): a base path config and a grid of values
+// Parameter sweeps (docs/formats.md, "Sweep file"): a base path config and a grid of values
 // for any of its numeric keys, plus the convenience axes noise_scale and path_scale.
 #pragma once
 
@@ -10,11 +10,10 @@
 #include "odomcov/config.hpp"
 #include "odomcov/validation.hpp"
 
-namespace YAML {
-class Node;
-}
-
 namespace odomcov {
+
+/// The parsed base config (opaque: its type is private to the library).
+struct SweepBase;
 
 struct SweepAxis {
   std::string name;  // dotted config key, "noise_scale" or "path_scale"
@@ -39,7 +38,7 @@ class SweepPlan {
   /// The validated config of point i. Throws InputError naming the sweep file and axis.
   Config point_config(std::size_t i) const;
 
-  std::shared_ptr<const YAML::Node> base;  // the parsed base config
+  std::shared_ptr<const SweepBase> base;  // the parsed base config
 };
 
 /// Reads and validates a sweep file, and every grid point's config, before any work starts.
