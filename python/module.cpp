@@ -1,5 +1,5 @@
 // The odomcov Python module (pybind11). NumPy arrays in and out; dicts shaped like the CLI's
-// JSON (docs/python.md). Frames and units as everywhere in odomcov (docs/conventions.md).
+// JSON (docs/library.md). Frames and units as everywhere in odomcov (docs/conventions.md).
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -302,7 +302,7 @@ py::dict diagnose_py(const Suite& suite, double alpha, const std::vector<std::st
 
 PYBIND11_MODULE(_odomcov, m) {
   m.doc() = "odomcov: closed-form covariance of two-wheel odometry, its Monte-Carlo check, and "
-            "model-against-measurement tools (docs/python.md)";
+            "model-against-measurement tools (docs/library.md)";
   py::register_exception<InputError>(m, "InputError", PyExc_ValueError);
 
   m.def("predict", &predict_py, py::arg("left"), py::arg("right"), py::arg("wheelbase"),

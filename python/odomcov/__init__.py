@@ -3,7 +3,7 @@
 The closed-form covariance of odometry error [Kleeman95, Chong97], its Monte-Carlo check, and
 the tools that set a model against measured runs. Frames: poses (x, y, theta) in the start
 frame, theta counter-clockwise; errors are true - odometry; metres and radians. See
-docs/python.md in the odomcov repository.
+docs/library.md in the odomcov repository.
 """
 from ._odomcov import (  # noqa: F401
     InputError,
