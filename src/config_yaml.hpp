@@ -21,7 +21,7 @@ Config parse_config(const YAML::Node& root, const std::string& file);
 Path parse_path(const YAML::Node& node, const std::string& file, const std::string& key,
                 double wheelbase_m);
 
-/// Parses an effect list (single-key maps, SPEC "Effect catalogue"); `key` for messages.
+/// Parses an effect list (single-key maps, docs/formats.md "Effect catalogue"); `key` for messages.
 EffectList parse_effects(const YAML::Node& node, const std::string& file, const std::string& key);
 
 /// Parses a `world` block {effects, k_left, k_right}; missing k's default to `nominal`.

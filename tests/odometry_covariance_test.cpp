@@ -110,5 +110,16 @@ TEST(OdometryCovariance, WheelJacobianIsFirstOrderExact) {
   }
 }
 
+/// World covariances are symmetric to the last bit, so reports never print P(0,1) != P(1,0).
+TEST(OdometryCovariance, WorldCovarianceIsExactlySymmetric) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int i = 0; i < 100; ++i) {
+    const Matrix3 q = arc_covariance({2 * u(rng), 2 * u(rng)}, 0.5, {1e-3, 3e-3});
+    const Matrix3 w = tangential_to_world(q, 10 * u(rng));
+    EXPECT_EQ(w, w.transpose());
+  }
+}
+
 }  // namespace
 }  // namespace odomcov

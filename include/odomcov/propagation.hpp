@@ -34,7 +34,7 @@ PathCovariance path_covariance(const Path& path, const Robot& robot);
 /// (dtheta, d) and N the sample's noise intensity. It converges to path_covariance as the
 /// sample rate grows, with an O(1/f^2) difference (midpoint-rule error of the noise integral)
 /// when keyframes fall on sample boundaries. A sample that straddles a keyframe at which a
-/// wheel reverses has noise k^2 |net increment| (SPEC noise model), an O(1/f) difference.
+/// wheel reverses has noise k^2 |net increment| (noise model of docs/conventions.md), an O(1/f) difference.
 /// Returns the world-frame covariance at the end of the path.
 Matrix3 sampled_covariance(const Path& path, const Robot& robot);
 

@@ -66,7 +66,7 @@ std::string model_yaml(const SuiteModel& model);
 /// by piece, or the experiment's sampled path.
 Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
-/// The error as the SPEC defines it at `wheelbase_m`: measured (true) - odometry, theta wrapped.
+/// The error as docs/conventions.md defines it at `wheelbase_m`: measured (true) - odometry, theta wrapped.
 Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
 /// The odometry end pose of a sampled path: the encoder samples integrated with the exact arc

@@ -49,7 +49,7 @@ SweepPlan load_sweep(const std::string& file);
 /// changes so that the faster wheel keeps its speed.
 Path scale_path(const Path& path, double scale);
 
-/// The metrics of one sweep row (SPEC "Sweep file" CSV columns).
+/// The metrics of one sweep row (docs/formats.md, "Sweep file": the CSV columns).
 struct SweepMetrics {
   Vector3 std_rel_err = Vector3::Zero();  // simulated std / theory std - 1
   double max_corr_diff = 0.0;             // max |corr_sim - corr_theory| off the diagonal

@@ -31,7 +31,7 @@ struct WorldFile {
   std::vector<WorldExperiment> experiments;
 };
 
-/// Reads and validates a world file (SPEC-style errors).
+/// Reads and validates a world file (errors name file, line and key).
 WorldFile load_world(const std::string& file);
 
 /// The measured end poses (start frame) of experiment i: odometry end pose + simulated error,
