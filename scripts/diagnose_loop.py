@@ -1,5 +1,7 @@
 #!/usr/bin/python3
-"""The measurement loop of issue 7: diagnose, adopt the model it proposes, repeat, then fit.
+"""Find what your odometry model is missing, step by step: run `odomcov diagnose` on a suite,
+add the effect it names to the model, and repeat until nothing more is found; then compare the
+final model with the runs and fit all the effects found together.
 
     repeat: odomcov diagnose SUITE, and adopt its model (the named effect added and every
             effect refitted, each on the part of the likelihood it explains)
@@ -59,8 +61,9 @@ def copy_suite(suite, to):
     base = os.path.dirname(os.path.abspath(suite))
     with open(suite) as f:
         text = f.read()
-    text = re.sub(r"(?<=[\s\[,])(?!/)([^\s,\[\]{}'\"]+\.csv)(?=[\s,\]]|$)",
-                  lambda m: os.path.join(base, m.group(1)), text)
+    # plain or quoted (the suite writer quotes file names) relative paths
+    text = re.sub(r"(?<=[\s\[,])([\"']?)(?!/)([^\s,\[\]{}'\"]+\.csv)\1(?=[\s,\]]|$)",
+                  lambda m: m.group(1) + os.path.join(base, m.group(2)) + m.group(1), text)
     with open(to, "w") as f:
         f.write(text)
 
@@ -259,11 +262,15 @@ def markdown(report):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--odomcov", required=True)
-    parser.add_argument("suite")
-    parser.add_argument("--out", required=True)
-    parser.add_argument("--rounds", type=int, default=8, help="at most this many effects")
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--odomcov", required=True, metavar="BIN",
+                        help="the odomcov program, e.g. build/src/cli/odomcov")
+    parser.add_argument("suite", help="measurement suite (suite.yaml); it is copied, never changed")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="folder for the edited suite, each round's diagnose JSON and loop.json")
+    parser.add_argument("--rounds", type=int, default=8,
+                        help="stop after adding this many effects (default: 8)")
     parser.add_argument("--holdout", metavar="SUITE",
                         help="a suite of other runs: compare it with the original model and "
                              "with the model the loop built")

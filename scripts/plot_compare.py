@@ -10,10 +10,17 @@ Usage: plot_compare.py COMPARE.json [--pairs xy|all] [--experiments NAME,...] [-
                        --out FIG.png
 """
 import argparse
+import os
+import sys
 import json
 import math
 
-import matplotlib
+try:
+    import matplotlib
+except ImportError:
+    print("%s: needs matplotlib; install Debian's python3-matplotlib (scripts/setup.sh does) "
+          "and run it with /usr/bin/python3" % os.path.basename(sys.argv[0]), file=sys.stderr)
+    sys.exit(2)
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -35,7 +42,7 @@ def add_ellipse(ax, mean, cov, i, j, **style):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     parser.add_argument("compare", help="JSON of odomcov compare")
     parser.add_argument("--pairs", choices=["xy", "all"], default="xy")
     parser.add_argument("--experiments", help="comma-separated names (default: all)")

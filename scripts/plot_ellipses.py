@@ -7,13 +7,25 @@ ellipse of the accumulated covariance (solid) and of the preceding segment's own
 JSON of `odomcov run CONFIG --json FILE --samples N`) it overlays the Monte-Carlo end points,
 magnified about the odometry end pose by the same factor.
 
+It also draws ellipses along an encoder log: given the JSON of `odomcov predict LOG.csv --json
+FILE` (pose and covariance per sample), it draws the path and --count ellipses evenly spaced
+along it.
+
 Usage: plot_ellipses.py THEORY.json [--run RUN.json] [--sigma N] [--magnify M] --out FIG.png
+       plot_ellipses.py PREDICT.json [--count N] [--sigma N] [--magnify M] --out FIG.png
 """
 import argparse
+import os
+import sys
 import json
 import math
 
-import matplotlib
+try:
+    import matplotlib
+except ImportError:
+    print("%s: needs matplotlib; install Debian's python3-matplotlib (scripts/setup.sh does) "
+          "and run it with /usr/bin/python3" % os.path.basename(sys.argv[0]), file=sys.stderr)
+    sys.exit(2)
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -43,9 +55,35 @@ def nice_magnification(target):
     return float(10**exponent)
 
 
+def plot_log(data, args):
+    """Ellipses along a log: the JSON of `odomcov predict`."""
+    samples = data["samples"]
+    pose = np.array([s["pose"] for s in samples])
+    extent = max(np.ptp(pose[:, 0]), np.ptp(pose[:, 1]), 1e-9)
+    picks = sorted(set(np.linspace(0, len(samples) - 1, max(args.count, 2)).round().astype(int)))
+    largest = max(ellipse_axes(samples[i]["cov"], args.sigma)[0] for i in picks)
+    magnify = args.magnify or nice_magnification(0.08 * extent / max(largest, 1e-300))
+    fig, ax = plt.subplots(figsize=(8, 7))
+    ax.plot(pose[:, 0], pose[:, 1], "k-", lw=1.2, label="odometry path")
+    for n, i in enumerate(picks):
+        a, b, angle = ellipse_axes(samples[i]["cov"], args.sigma)
+        ax.add_patch(Ellipse(pose[i, :2], 2 * a * magnify, 2 * b * magnify, angle=angle, fill=False,
+                             color="C0", lw=1.2, label=None if n else
+                             f"{args.sigma:g}-sigma ellipse x {magnify:g}"))
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (start frame)")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{data.get('log', 'log')}: covariance along the path")
+    ax.legend(loc="best")
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=150)
+    print(f"wrote {args.out} ({len(picks)} ellipses, magnified {magnify:g}x)")
+
+
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("theory", help="JSON of odomcov theory")
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
+    parser.add_argument("theory", help="JSON of odomcov theory, or of odomcov predict")
+    parser.add_argument("--count", type=int, default=12, help="predict JSON: ellipses along the log")
     parser.add_argument("--run", help="JSON of odomcov run with --samples, for the scatter")
     parser.add_argument("--sigma", type=float, default=1.0, help="ellipse level in sigmas")
     parser.add_argument("--magnify", type=float, help="ellipse magnification (default: auto)")
@@ -54,6 +92,8 @@ def main():
 
     with open(args.theory) as f:
         theory = json.load(f)
+    if "samples" in theory:
+        return plot_log(theory, args)
     keyframes = theory["keyframes"]
     trace = theory["trace"]
     center = np.asarray(trace["center"])

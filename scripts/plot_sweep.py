@@ -19,13 +19,20 @@ Usage: plot_sweep.py SWEEP.csv [--json SWEEP.json] [--x AXIS] [--x-factor F] [--
                      [--alpha A] --out FIG.png
 """
 import argparse
+import os
+import sys
 import csv
 import itertools
 import json
 import math
 from statistics import NormalDist
 
-import matplotlib
+try:
+    import matplotlib
+except ImportError:
+    print("%s: needs matplotlib; install Debian's python3-matplotlib (scripts/setup.sh does) "
+          "and run it with /usr/bin/python3" % os.path.basename(sys.argv[0]), file=sys.stderr)
+    sys.exit(2)
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -81,7 +88,7 @@ def rejection_note(xs, ps, alpha, x_label):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     parser.add_argument("csv", help="CSV of odomcov sweep")
     parser.add_argument("--json", help="JSON of the same sweep (adds the noise-induced mean)")
     parser.add_argument("--x", help="axis for the horizontal axis (default: the first)")

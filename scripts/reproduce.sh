@@ -4,6 +4,7 @@
 #   scripts/reproduce.sh            # all
 #   scripts/reproduce.sh kleeman95  # one part: kleeman95, sweeps, optiodom
 set -euo pipefail
+shopt -s failglob  # a pattern that matches nothing is an error, never a literal argument
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
 "$root/scripts/build.sh"
@@ -12,17 +13,33 @@ python=/usr/bin/python3  # Debian's, which has matplotlib
 results="$root/results"
 parts=("${@:-all}")
 want() { [[ " ${parts[*]} " == *" all "* || " ${parts[*]} " == *" $1 "* ]]; }
+# save FILE CMD...: runs CMD with stdout into a temporary file beside FILE, and moves it over
+# FILE only when CMD succeeds, so a failure never empties a committed result.
+save() {
+  local dest=$1 tmp
+  shift
+  tmp=$(mktemp "$dest.XXXXXX")
+  if "$@" > "$tmp"; then
+    chmod 644 "$tmp"
+    mv -f "$tmp" "$dest"
+  else
+    local code=$?
+    rm -f "$tmp"
+    echo "reproduce.sh: '$*' failed (exit $code); $dest left as it was" >&2
+    return "$code"
+  fi
+}
 
 if want kleeman95; then
   out="$results/kleeman95"
   mkdir -p "$out"
   # Tables I and II: the closed form along the Fig. 7 path.
-  "$odomcov" theory "$root/configs/kleeman95/fig7.yaml" --json "$out/table1.json" > "$out/table1.txt"
-  "$odomcov" theory "$root/configs/kleeman95/fig9.yaml" --json "$out/table2.json" > "$out/table2.txt"
+  save "$out/table1.txt" "$odomcov" theory "$root/configs/kleeman95/fig7.yaml" --json "$out/table1.json"
+  save "$out/table2.txt" "$odomcov" theory "$root/configs/kleeman95/fig9.yaml" --json "$out/table2.json"
   # Tables III-V: 10 000 Monte-Carlo runs against theory (2000 end points kept for the plots).
   for t in 3 4 5; do
-    "$odomcov" run "$root/configs/kleeman95/table$t.yaml" --samples 2000 \
-      --json "$out/table$t.json" > "$out/table$t.txt"
+    save "$out/table$t.txt" "$odomcov" run "$root/configs/kleeman95/table$t.yaml" --samples 2000 \
+      --json "$out/table$t.json"
   done
   # Figures 8 and 9, with the Table III and IV end points.
   "$python" "$root/scripts/plot_ellipses.py" "$out/table1.json" --run "$out/table3.json" --out "$out/fig8.png"
@@ -54,7 +71,11 @@ fi
 if want optiodom; then
   cd "$root"  # paths in the reports are relative to the checkout
   out=results/optiodom
-  data=../shared/data/optiodom/data/diff
+  data=data/optiodom/data/diff  # the OptiOdom recordings [Sousa22], shipped in the repository
+  if [[ ! -d $data/square ]]; then
+    echo "reproduce.sh: $root/$data: no OptiOdom recordings (they ship in data/optiodom/)" >&2
+    exit 2
+  fi
   suite=build/optiodom  # imported suites are regenerated, not committed
   mkdir -p "$out"
   # One nominal robot for every session: B = 0.2 m, D = 0.084 m. Some sessions' metadata say
@@ -64,12 +85,12 @@ if want optiodom; then
     shift
     "$odomcov" import optiodom "$@" --wheelbase 0.2 --diameters 0.084,0.084 --out "$dir"
   }
-  import_sessions "$suite" "$data"/square/* "$data"/ivanjko/* "$data"/circular/* "$data"/free/* > "$out/import.txt"
-  "$odomcov" compare "$suite/suite.yaml" --json "$out/compare_nominal.json" > "$out/compare_nominal.txt"
+  save "$out/import.txt" import_sessions "$suite" "$data"/square/* "$data"/ivanjko/* "$data"/circular/* "$data"/free/*
+  save "$out/compare_nominal.txt" "$odomcov" compare "$suite/suite.yaml" --json "$out/compare_nominal.json"
   cw=$(grep -o 'square-[0-9]*-cw' "$suite/suite.yaml" | sort -u | paste -sd,)
   ccw=$(grep -o 'square-[0-9]*-ccw' "$suite/suite.yaml" | sort -u | paste -sd,)
-  "$odomcov" umbmark "$suite/suite.yaml" --cw "$cw" --ccw "$ccw" --side 0.75 \
-    --json "$out/umbmark.json" > "$out/umbmark.txt"
+  save "$out/umbmark.txt" "$odomcov" umbmark "$suite/suite.yaml" --cw "$cw" --ccw "$ccw" --side 0.75 \
+    --json "$out/umbmark.json"
   for type in square ivanjko circular free; do
     "$python" scripts/plot_compare.py "$out/compare_nominal.json" --match "$type-" \
       --title "OptiOdom $type runs against the nominal model (B = 0.2 m, kL = kR = 1e-3)" \
@@ -80,14 +101,14 @@ if want optiodom; then
     local name=$1 from=$2
     shift 2
     rm -rf "$suite-loop-$name"
-    "$python" scripts/diagnose_loop.py --odomcov "$odomcov" "$from" --out "$suite-loop-$name" "$@" \
-      > "$out/loop_$name.md"
+    save "$out/loop_$name.md" "$python" scripts/diagnose_loop.py --odomcov "$odomcov" "$from" \
+      --out "$suite-loop-$name" "$@"
     cp "$suite-loop-$name/loop.json" "$out/loop_$name.json"
   }
   loop all "$suite/suite.yaml"
   # The robot and model the loop built, to paste into a suite.
-  sed -n '/^robot:/p; /^model:/,/^experiments:/{/^experiments:/!p}' "$suite-loop-all/suite.yaml" \
-    > "$out/model_all.yaml"
+  save "$out/model_all.yaml" sed -n '/^robot:/p; /^model:/,/^experiments:/{/^experiments:/!p}' \
+    "$suite-loop-all/suite.yaml"
   # Hold-out: the loop on the squares and Ivanjko paths only; its model then meets the circles
   # and free paths it never saw.
   import_sessions "$suite-train" "$data"/square/* "$data"/ivanjko/* > /dev/null

@@ -9,6 +9,7 @@ packages=(
   libboost-math-dev librandom123-dev libnlopt-cxx-dev
   libgtest-dev libbenchmark-dev
   python3-matplotlib python3-numpy
+  pybind11-dev python3-pybind11 python3-dev python3-pytest
 )
 
 missing=()

@@ -157,7 +157,8 @@ Matrix3 world_from_tangential(double heading_rad) {
 
 Matrix3 tangential_to_world(const Matrix3& P_tangential, double heading_rad) {
   const Matrix3 t = world_from_tangential(heading_rad);
-  return t * P_tangential * t.transpose();
+  const Matrix3 p = t * P_tangential * t.transpose();
+  return 0.5 * (p + p.transpose());  // symmetric to the last bit, as a covariance must print
 }
 
 ErrorEllipse error_ellipse(const Matrix3& P_world) {
@@ -173,6 +174,30 @@ ErrorEllipse error_ellipse(const Matrix3& P_world) {
   if (angle <= -0.5 * M_PI) angle += M_PI;
   e.angle_rad = angle;
   return e;
+}
+
+Matrix32 arc_increment_jacobian(double center_m, double angle_rad) {
+  // g(d, a) = (d sinc a, d (1 - cos a)/a, a) in the start frame of the sample.
+  //   dg/dd = (sinc a, (1 - cos a)/a, 0) = (sinc a, (a/2) sinc^2(a/2), 0)
+  //   dg/da = (d sinc'(a), d [(1 - cos a)/a]', 1) with, free of cancellation,
+  //     sinc'(a)           = (cos a - sinc a)/a = a (u3(a) - sinc^2(a/2)/2)
+  //     [(1 - cos a)/a]'   = sinc a - sinc^2(a/2)/2
+  const double a = angle_rad;
+  const double d = center_m;
+  const double sinc_a = series::sinc(a);
+  const double sinc_half = series::sinc(0.5 * a);
+  const double half_sinc2 = 0.5 * sinc_half * sinc_half;
+  Eigen::Matrix<double, 2, 2> j_start;  // columns: d/da, d/dd; rows: x, y in the start frame
+  j_start << d * a * (series::u3(a) - half_sinc2), sinc_a,  //
+      d * (sinc_a - half_sinc2), a * half_sinc2;
+  const double c = std::cos(a);
+  const double s = std::sin(a);
+  Eigen::Matrix2d end_from_start;
+  end_from_start << c, s, -s, c;
+  Matrix32 j;
+  j.topRows<2>() = end_from_start * j_start;
+  j.row(2) << 1.0, 0.0;
+  return j;
 }
 
 }  // namespace odomcov

@@ -4,6 +4,7 @@
 #include <filesystem>
 
 #include "odomcov/format.hpp"
+#include "config_yaml.hpp"
 #include "yaml_util.hpp"
 
 namespace odomcov {

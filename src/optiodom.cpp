@@ -9,6 +9,7 @@
 #include "csv.hpp"
 #include "odomcov/error.hpp"
 #include "odomcov/format.hpp"
+#include "odomcov/suite_writer.hpp"
 
 namespace odomcov {
 namespace {
@@ -148,19 +149,16 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
       sum.mean_turn_rad += turned;
     }
   }
-  std::string yaml = "# Imported by `odomcov import optiodom` from the OptiOdom recordings\n"
-                     "# (Sousa et al., J Intell Robot Syst 105:39, 2022; MIT licence).\n"
-                     "# Ticks to metres: pi D / (" + format_number(metas[0].gear) + " x " +
-                     format_number(metas[0].resolution) + "), no quadrature factor.\n";
-  yaml += "name: " + options.name + "\n";
-  yaml += robot_yaml(Robot{wheelbase, {options.k, options.k}}) + "\n";
-  yaml += "measurement_noise: {xy: " + format_number(options.measurement_noise.xy_m) +
-          ", theta_deg: " + format_number(options.measurement_noise.theta_rad / kDegToRad) + "}\n";
-  yaml += "experiments:\n";
-  for (const auto& [name, logs] : experiments) {
-    yaml += "  - name: " + name + "\n    logs:\n";
-    for (const std::string& l : logs) yaml += "      - " + l + "\n";
-  }
+  SuiteDocument doc;
+  doc.comments = {"Imported by `odomcov import optiodom` from the OptiOdom recordings",
+                  "(Sousa et al., J Intell Robot Syst 105:39, 2022; MIT licence).",
+                  "Ticks to metres: pi D / (" + format_number(metas[0].gear) + " x " +
+                      format_number(metas[0].resolution) + "), no quadrature factor."};
+  doc.name = options.name;
+  doc.robot = Robot{wheelbase, {options.k, options.k}};
+  doc.measurement_noise = options.measurement_noise;
+  for (const auto& [name, logs] : experiments) doc.experiments.push_back({name, "", "", logs});
+  const std::string yaml = suite_yaml(doc);
   files.push_back({"suite.yaml", yaml});
   if (summary) {
     for (auto& [name, sum] : sums) {

@@ -1,5 +1,7 @@
 #include "odomcov/propagation.hpp"
 
+#include <type_traits>
+
 #include <cmath>
 #include <algorithm>
 #include <complex>
@@ -30,30 +32,6 @@ PathCovariance path_covariance(const Path& path, const Robot& robot) {
     out.keyframes.push_back(current);
   }
   return out;
-}
-
-Matrix32 arc_increment_jacobian(double center_m, double angle_rad) {
-  // g(d, a) = (d sinc a, d (1 - cos a)/a, a) in the start frame of the sample.
-  //   dg/dd = (sinc a, (1 - cos a)/a, 0) = (sinc a, (a/2) sinc^2(a/2), 0)
-  //   dg/da = (d sinc'(a), d [(1 - cos a)/a]', 1) with, free of cancellation,
-  //     sinc'(a)           = (cos a - sinc a)/a = a (u3(a) - sinc^2(a/2)/2)
-  //     [(1 - cos a)/a]'   = sinc a - sinc^2(a/2)/2
-  const double a = angle_rad;
-  const double d = center_m;
-  const double sinc_a = series::sinc(a);
-  const double sinc_half = series::sinc(0.5 * a);
-  const double half_sinc2 = 0.5 * sinc_half * sinc_half;
-  Eigen::Matrix<double, 2, 2> j_start;  // columns: d/da, d/dd; rows: x, y in the start frame
-  j_start << d * a * (series::u3(a) - half_sinc2), sinc_a,  //
-      d * (sinc_a - half_sinc2), a * half_sinc2;
-  const double c = std::cos(a);
-  const double s = std::sin(a);
-  Eigen::Matrix2d end_from_start;
-  end_from_start << c, s, -s, c;
-  Matrix32 j;
-  j.topRows<2>() = end_from_start * j_start;
-  j.row(2) << 1.0, 0.0;
-  return j;
 }
 
 Matrix3 sampled_covariance(const Path& path, const Robot& robot) {
@@ -200,8 +178,12 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces, const Robot&
 
 }  // namespace effects
 
-Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
-                   const EffectList& effect_list) {
+namespace {
+
+/// The engine's loop; `each` (when not nullptr) sees the prediction after every piece.
+template <class Each>
+Prediction propagate(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                     const EffectList& effect_list, Each&& each) {
   const effects::ResolvedPath path = effects::resolve(pieces, robot, effect_list);
   const int constants = path.run_constants;
   const double B = robot.wheelbase_m;
@@ -225,12 +207,32 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
     noise_mean += noise_mean_of_piece(true_pose.z(), d, a, v0, P(2, 2) - v0, r.intensity(0, 1));
     true_pose = compose(true_pose, arc_displacement(d, a));
     odometry = drive(odometry, r.encoder, B);
+    if constexpr (!std::is_same_v<std::decay_t<Each>, std::nullptr_t>) {
+      each(Prediction{pose_error(true_pose, odometry), {noise_mean.real(), noise_mean.imag(), 0.0},
+                      tangential_to_world(P, true_pose.z()), odometry, true_pose});
+    }
   }
   out.odometry_end_pose = odometry;
   out.true_end_pose = true_pose;
   out.mean = pose_error(true_pose, odometry);
   out.noise_mean = {noise_mean.real(), noise_mean.imag(), 0.0};
   out.cov = tangential_to_world(P, true_pose.z());
+  return out;
+}
+
+}  // namespace
+
+Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                   const EffectList& effect_list) {
+  return propagate(pieces, robot, effect_list, nullptr);
+}
+
+std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,
+                                           const Robot& robot, const EffectList& effect_list) {
+  std::vector<Prediction> out;
+  out.reserve(pieces.size() + 1);
+  out.emplace_back();  // the start: exactly known
+  propagate(pieces, robot, effect_list, [&out](const Prediction& p) { out.push_back(p); });
   return out;
 }
 

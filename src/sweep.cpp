@@ -7,9 +7,14 @@
 
 #include "odomcov/format.hpp"
 #include "random.hpp"
+#include "config_yaml.hpp"
 #include "yaml_util.hpp"
 
 namespace odomcov {
+
+struct SweepBase {
+  YAML::Node root;
+};
 namespace {
 
 using yaml::Where;
@@ -103,7 +108,7 @@ std::uint64_t SweepPlan::point_seed(std::size_t i) const {
 
 Config SweepPlan::point_config(std::size_t i) const {
   const std::vector<double> values = point_values(i);
-  YAML::Node root = YAML::Clone(*base);
+  YAML::Node root = YAML::Clone(base->root);
   double noise_scale = 1.0, path_scale = 1.0;
   bool runs_on_axis = false;
   auto describe = [&] {
@@ -186,7 +191,7 @@ SweepPlan load_sweep(const std::string& file) {
     }
     plan.axes.push_back(std::move(axis));
   }
-  plan.base = std::make_shared<const YAML::Node>(yaml::load_file(plan.base_file));
+  plan.base = std::make_shared<const SweepBase>(SweepBase{yaml::load_file(plan.base_file)});
   for (std::size_t i = 0; i < plan.point_count(); ++i) plan.point_config(i);  // validate all
   return plan;
 }

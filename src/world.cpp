@@ -9,7 +9,9 @@
 
 #include "odomcov/format.hpp"
 #include "odomcov/simulator.hpp"
+#include "odomcov/suite_writer.hpp"
 #include "random.hpp"
+#include "config_yaml.hpp"
 #include "yaml_util.hpp"
 
 namespace odomcov {
@@ -56,7 +58,7 @@ WorldFile load_world(const std::string& file) {
                          w.robot.wheelbase_m);
     check_simulation_size(file, yaml::line_of(node["runs"]), xw.child("runs").key, ex.runs,
                           sample_count(ex.path));
-    ex.path_node = std::make_shared<const YAML::Node>(YAML::Clone(node["path"]));
+    ex.path_yaml = YAML::Dump(node["path"]);
     w.experiments.push_back(std::move(ex));
   }
   return w;
@@ -83,29 +85,20 @@ std::vector<Vector3> synthesize(const WorldFile& w, std::size_t experiment, int 
   return measured;
 }
 
-std::string suite_yaml(const WorldFile& w) {
-  YAML::Emitter out;
-  out.SetDoublePrecision(15);  // round-trips any value typed with up to 15 digits
-  out << YAML::Comment("Measurement suite written by `odomcov synth` from " +
-                       std::filesystem::path(w.file).filename().string())
-      << YAML::BeginMap;
-  out << YAML::Key << "name" << YAML::Value << w.name;
-  out << YAML::Key << "robot" << YAML::Value << YAML::Flow << YAML::BeginMap
-      << YAML::Key << "wheelbase" << YAML::Value << w.robot.wheelbase_m << YAML::Key << "k_left"
-      << YAML::Value << w.robot.noise.k_left << YAML::Key << "k_right" << YAML::Value
-      << w.robot.noise.k_right << YAML::EndMap;
-  out << YAML::Key << "measurement_noise" << YAML::Value << YAML::Flow << YAML::BeginMap
-      << YAML::Key << "xy" << YAML::Value << w.measurement_noise.xy_m << YAML::Key << "theta_deg"
-      << YAML::Value << w.measurement_noise.theta_rad / kDegToRad << YAML::EndMap;
-  out << YAML::Key << "experiments" << YAML::Value << YAML::BeginSeq;
+SuiteDocument world_suite(const WorldFile& w) {
+  SuiteDocument doc;
+  doc.comments = {"Measurement suite written by `odomcov synth` from " +
+                  std::filesystem::path(w.file).filename().string()};
+  doc.name = w.name;
+  doc.robot = w.robot;
+  doc.measurement_noise = w.measurement_noise;
   for (const WorldExperiment& ex : w.experiments) {
-    out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << ex.name << YAML::Key << "path"
-        << YAML::Value << *ex.path_node << YAML::Key << "measurements" << YAML::Value
-        << ex.name + ".csv" << YAML::EndMap;
+    doc.experiments.push_back({ex.name, ex.path_yaml, ex.name + ".csv", {}});
   }
-  out << YAML::EndSeq << YAML::EndMap;
-  return std::string(out.c_str()) + "\n";
+  return doc;
 }
+
+std::string suite_yaml(const WorldFile& w) { return suite_yaml(world_suite(w)); }
 
 std::string measurements_csv(const std::vector<Vector3>& measured) {
   std::string text = "run,x,y,theta\n";

@@ -101,7 +101,7 @@ TEST(Propagation, ReproducesLKTheoreticalOfTablesIIIandIV) {
   const Matrix3 p4 = path_covariance(fig7_path(), {0.5, {1e-3, 2e-3}}).end().P_world;
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
-      // Table IV prints 3-4 significant figures; seeds/README.md gives 5 (5.6797e-05, ...).
+      // Table IV prints 3-4 significant figures; docs/conventions.md gives 5 (5.6797e-05, ...).
       EXPECT_NEAR(p4(i, j), table4(i, j), 0.5e-6 + 5e-4 * std::abs(table4(i, j)));
     }
   }
@@ -160,7 +160,7 @@ TEST(Propagation, SampledPropagationConvergesToClosedForm) {
   // Jacobians, no integrals). Its difference from the closed form is the midpoint-rule error of
   // the noise integral, O(1/f^2): doubling f must cut it ~4x. Keyframe times are put on the
   // 400 Hz grid: a sample that straddles a keyframe where a wheel reverses has noise
-  // k^2 |net increment| (SPEC), an O(1/f) effect of sampling that is not under test here.
+  // k^2 |net increment| (docs/conventions.md), an O(1/f) effect of sampling that is not under test here.
   std::mt19937_64 rng(88);
   for (int trial = 0; trial < 20; ++trial) {
     test::RandomCase c = test::random_case(rng);

@@ -1,6 +1,6 @@
 // Closed-form odometry error covariance of one constant-curvature segment.
 //
-// Frames and signs ([Kleeman95] §3-§5; ../shared/seeds/README.md):
+// Frames and signs ([Kleeman95] §3-§5; errata in docs/conventions.md):
 //   * tangential error e = (s, p, theta): s along the heading at the END of the segment,
 //     p to its left, theta counter-clockwise; error = true pose - odometry pose.
 //   * a segment is described by its wheel travels (left_m, right_m) and the wheelbase B, or
@@ -68,6 +68,12 @@ Matrix3 arc_noise_covariance(double center_m, double angle_rad, const Matrix2& i
 /// int_0^1 Psi(v) dv: the end error caused by a (e_dtheta, e_d) spread uniformly over the segment.
 /// Used for per-run constant errors (e.g. a wheel radius error), whose effect is first order.
 Matrix32 arc_input_gain(double center_m, double angle_rad);
+
+/// d(arc_displacement)/d(angle, center) of [Chong97, eq. (13)], rotated into the end frame of the
+/// segment: columns (d/d angle [m/rad, m/rad, 1], d/d center [1, 1, 0]), rows (s, p, theta)
+/// tangential at the end. The first-order input gain of the discrete (per-sample) update
+/// [Wang88]; free of cancellation for all (d, a) through sinc and the u3 kernel.
+Matrix32 arc_increment_jacobian(double center_m, double angle_rad);
 
 /// Q of one segment with independent wheel noise: arc_noise_covariance(wheel_noise_intensity).
 Matrix3 arc_covariance(const ArcSegment& seg, double wheelbase_m, const WheelNoise& k);

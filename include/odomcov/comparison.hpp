@@ -11,7 +11,7 @@
 
 namespace odomcov {
 
-/// compare for one experiment (SPEC "JSON of compare").
+/// compare for one experiment (docs/json.md, "compare").
 struct ExperimentComparison {
   std::string name;
   std::int64_t n = 0;

@@ -1,4 +1,4 @@
-// The path config of ../shared/SPEC.md ("Path config"): robot, path, simulation settings.
+// The path config (docs/formats.md, "Path config"): robot, path, simulation settings.
 #pragma once
 
 #include <cstdint>
@@ -6,10 +6,6 @@
 
 #include "odomcov/effects.hpp"
 #include "odomcov/path.hpp"
-
-namespace YAML {
-class Node;
-}
 
 namespace odomcov {
 
@@ -46,24 +42,6 @@ struct Config {
 
 /// Reads and validates a path config. Throws InputError (file:line: key: what) on bad input.
 Config load_config(const std::string& file);
-
-/// Validates an already-parsed YAML tree (used by `sweep`, which edits keys before parsing).
-Config parse_config(const YAML::Node& root, const std::string& file);
-
-/// Parses the `path` block (sample_rate plus keyframes or segments), shared with measurement
-/// suites. `key` is the block's dotted key path for messages.
-Path parse_path(const YAML::Node& node, const std::string& file, const std::string& key,
-                double wheelbase_m);
-
-/// Parses an effect list (single-key maps, SPEC "Effect catalogue"); `key` for messages.
-EffectList parse_effects(const YAML::Node& node, const std::string& file, const std::string& key);
-
-/// Parses a `world` block {effects, k_left, k_right}; missing k's default to `nominal`.
-World parse_world(const YAML::Node& node, const std::string& file, const std::string& key,
-                  const WheelNoise& nominal);
-
-/// Parses a `robot` block {wheelbase, k_left, k_right}.
-Robot parse_robot(const YAML::Node& node, const std::string& file, const std::string& key);
 
 /// Rejects a runs count outside [1, kMaxRuns] or a job above kMaxSimulationSteps.
 void check_simulation_size(const std::string& file, int line, const std::string& key,

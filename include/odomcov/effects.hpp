@@ -1,4 +1,4 @@
-// Physical effects (../shared/SPEC.md, "Effect catalogue"): what a real robot does beyond white
+// Physical effects (docs/formats.md, "Effect catalogue"): what a real robot does beyond white
 // wheel noise. Each effect has a world side (the simulator's exact perturbation) and a model
 // side (its first-order contribution to the predicted mean and covariance). The catalogue and
 // its implementations live in src/effects/, one file per effect.
@@ -36,7 +36,7 @@ struct EffectInfo {
   std::vector<EffectParameterInfo> parameters;
   std::string physics;    // what it is, in plain words
   std::string signature;  // how it shows in the data
-  std::string summary;    // the SPEC catalogue's one-line definition
+  std::string summary;    // the catalogue's one-line definition (docs/formats.md)
   /// True when the effect moves the mean (a systematic error: Ed, Eb, Es); false when it only
   /// adds randomness, which shows in the covariance (and the tails).
   bool systematic = false;
@@ -45,7 +45,7 @@ struct EffectInfo {
   bool heavy_tails = false;
 };
 
-/// Every effect of the catalogue, in SPEC order.
+/// Every effect of the catalogue, in the order of docs/formats.md.
 const std::vector<EffectInfo>& effect_catalogue();
 /// nullptr when unknown.
 const EffectInfo* find_effect(const std::string& name);

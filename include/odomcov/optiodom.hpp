@@ -1,4 +1,4 @@
-// Import of the OptiOdom recordings [Sousa22] (../shared/data/optiodom, MIT licence) as a
+// Import of the OptiOdom recordings [Sousa22] (data/optiodom, MIT licence) as a
 // measurement suite with per-run encoder logs.
 #pragma once
 
@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "odomcov/suite.hpp"
+#include "odomcov/suite_writer.hpp"
 
 namespace odomcov {
 
@@ -18,19 +19,6 @@ struct OptiOdomOptions {
   double k = 1e-3;  // nominal wheel noise for the suite's robot (to be fitted)
   MeasurementNoise measurement_noise{0.001, 0.1 * kDegToRad};  // OptiTrack, conservative
   std::string name = "optiodom";
-};
-
-/// One file of the imported suite: its path relative to the output directory and its text.
-struct ImportedFile {
-  std::string path;
-  std::string text;
-};
-
-struct ImportSummary {
-  std::string experiment;
-  std::size_t runs = 0;
-  double mean_travel_m = 0.0;
-  double mean_turn_rad = 0.0;
 };
 
 /// Reads every session (metadata and run files, validated) and returns the suite's files:

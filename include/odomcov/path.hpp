@@ -35,7 +35,7 @@ struct Path {
   double duration_s() const { return keyframes.empty() ? 0.0 : keyframes.back().t_s; }
 };
 
-/// The segment shorthand of the config (SPEC "Path config"): driven in order, each at constant
+/// The segment shorthand of the config (docs/formats.md, "Path config"): driven in order, each at constant
 /// wheel speeds with the faster wheel at `speed`.
 struct PathSegment {
   enum class Kind { line, turn, arc };
@@ -62,7 +62,7 @@ inline constexpr double kDegToRad = M_PI / 180.0;
 /// Angle wrapped to (-pi, pi].
 double wrap_angle(double angle_rad);
 
-/// The error of a pose against the odometry's as the SPEC defines it: true - odometry, with
+/// The error of a pose against the odometry's as docs/conventions.md defines it: true - odometry, with
 /// theta wrapped to (-pi, pi].
 Vector3 pose_error(const Vector3& true_pose, const Vector3& odometry);
 

@@ -34,7 +34,7 @@ PathCovariance path_covariance(const Path& path, const Robot& robot);
 /// (dtheta, d) and N the sample's noise intensity. It converges to path_covariance as the
 /// sample rate grows, with an O(1/f^2) difference (midpoint-rule error of the noise integral)
 /// when keyframes fall on sample boundaries. A sample that straddles a keyframe at which a
-/// wheel reverses has noise k^2 |net increment| (SPEC noise model), an O(1/f) difference.
+/// wheel reverses has noise k^2 |net increment| (noise model of docs/conventions.md), an O(1/f) difference.
 /// Returns the world-frame covariance at the end of the path.
 Matrix3 sampled_covariance(const Path& path, const Robot& robot);
 
@@ -72,14 +72,17 @@ struct Prediction {
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effects);
 
+/// The engine's prediction after every piece, for covariance along a trajectory (an encoder
+/// log, one piece per sample): element 0 is the start (all zero), element i the state after
+/// pieces[0 .. i-1]. Same frames and conventions as predict().
+std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,
+                                           const Robot& robot, const EffectList& effects);
+
 /// The pieces the engine uses for a keyframe path: each interval cut so that no piece turns
 /// more than kPieceMaxAngle or travels more than kPieceMaxTravel, which only refines the
 /// piecewise-linear V(u) of the noise-induced mean (the covariance does not change).
 inline constexpr double kPieceMaxAngle = 0.25;   // rad
 inline constexpr double kPieceMaxTravel = 0.25;  // m
 std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m);
-
-/// d(arc_displacement)/d(angle, center), rotated into the end frame of the sample.
-Matrix32 arc_increment_jacobian(double center_m, double angle_rad);
 
 }  // namespace odomcov

@@ -32,7 +32,7 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
 /// `group:` key yet, so every experiment is its own group and the test is untestable.
 std::string experiment_group(const SuiteExperiment& ex);
 
-/// The residual features, in the order of the SPEC's list.
+/// The residual features, in the order of docs/json.md's list.
 const std::vector<std::string>& residual_feature_names();
 
 /// One feature's alignment with the misfit.

@@ -1,5 +1,5 @@
 // Monte-Carlo simulation of sampled odometry in the closed-loop scenario ([Kleeman95] §7,
-// ../shared/SPEC.md): each sample's true wheel travel is the encoder increment plus
+// docs/conventions.md): each sample's true wheel travel is the encoder increment plus
 // N(0, k^2 |increment|), the true pose follows the exact arc update, and the error of a run is
 // true end pose - odometry end pose (theta wrapped to (-pi, pi]).
 //

@@ -1,4 +1,4 @@
-// Measurement suites (../shared/SPEC.md, "Measurement suite"): the runs a lab drove, each with
+// Measurement suites (docs/formats.md, "Measurement suite"): the runs a lab drove, each with
 // its measured end pose, to set against the model.
 #pragma once
 
@@ -8,10 +8,6 @@
 #include "odomcov/effects.hpp"
 #include "odomcov/path.hpp"
 
-namespace YAML {
-class Node;
-}
-
 namespace odomcov {
 
 /// Std-dev of the external reference (motion capture, sonar): x and y [m] and theta [rad].
@@ -20,11 +16,6 @@ struct MeasurementNoise {
   double theta_rad = 0.0;
   Matrix3 covariance() const;
 };
-
-/// Parses a `measurement_noise` block {xy [m], theta_deg}, both optional (0) and >= 0; `key`
-/// for messages. Suites and worlds share it.
-MeasurementNoise parse_measurement_noise(const YAML::Node& node, const std::string& file,
-                                         const std::string& key);
 
 /// One measured run. It keeps what was measured and the encoder travel, never an odometry pose:
 /// the odometry depends on the wheelbase the model uses, so it is computed where it is needed
@@ -79,7 +70,7 @@ std::string model_yaml(const SuiteModel& model);
 /// by piece, or the experiment's sampled path.
 Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
-/// The error as the SPEC defines it at `wheelbase_m`: measured (true) - odometry, theta wrapped.
+/// The error as docs/conventions.md defines it at `wheelbase_m`: measured (true) - odometry, theta wrapped.
 Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
 /// The odometry end pose of a sampled path: the encoder samples integrated with the exact arc

@@ -1,4 +1,4 @@
-// Parameter sweeps (../shared/SPEC.md, "Sweep file"): a base path config and a grid of values
+// Parameter sweeps (docs/formats.md, "Sweep file"): a base path config and a grid of values
 // for any of its numeric keys, plus the convenience axes noise_scale and path_scale.
 #pragma once
 
@@ -10,11 +10,10 @@
 #include "odomcov/config.hpp"
 #include "odomcov/validation.hpp"
 
-namespace YAML {
-class Node;
-}
-
 namespace odomcov {
+
+/// The parsed base config (opaque: its type is private to the library).
+struct SweepBase;
 
 struct SweepAxis {
   std::string name;  // dotted config key, "noise_scale" or "path_scale"
@@ -39,7 +38,7 @@ class SweepPlan {
   /// The validated config of point i. Throws InputError naming the sweep file and axis.
   Config point_config(std::size_t i) const;
 
-  std::shared_ptr<const YAML::Node> base;  // the parsed base config
+  std::shared_ptr<const SweepBase> base;  // the parsed base config
 };
 
 /// Reads and validates a sweep file, and every grid point's config, before any work starts.
@@ -50,7 +49,7 @@ SweepPlan load_sweep(const std::string& file);
 /// changes so that the faster wheel keeps its speed.
 Path scale_path(const Path& path, double scale);
 
-/// The metrics of one sweep row (SPEC "Sweep file" CSV columns).
+/// The metrics of one sweep row (docs/formats.md, "Sweep file": the CSV columns).
 struct SweepMetrics {
   Vector3 std_rel_err = Vector3::Zero();  // simulated std / theory std - 1
   double max_corr_diff = 0.0;             // max |corr_sim - corr_theory| off the diagonal

@@ -1,5 +1,5 @@
 // One validation: the Monte-Carlo simulation of a config against its theory, with the tests of
-// [Kleeman95] §7 made proper (../shared/SPEC.md, "JSON of run").
+// [Kleeman95] §7 made proper (docs/json.md, "run").
 #pragma once
 
 #include <string>

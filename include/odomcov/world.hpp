@@ -5,16 +5,12 @@
 #pragma once
 
 #include <cstdint>
-#include <memory>
 #include <string>
 #include <vector>
 
 #include "odomcov/config.hpp"
 #include "odomcov/suite.hpp"
-
-namespace YAML {
-class Node;
-}
+#include "odomcov/suite_writer.hpp"
 
 namespace odomcov {
 
@@ -22,7 +18,7 @@ struct WorldExperiment {
   std::string name;
   std::int64_t runs = 0;
   Path path;
-  std::shared_ptr<const YAML::Node> path_node;  // as written, to copy into the suite
+  std::string path_yaml;  // the path block as written (YAML text), to copy into the suite
 };
 
 struct WorldFile {
@@ -35,13 +31,15 @@ struct WorldFile {
   std::vector<WorldExperiment> experiments;
 };
 
-/// Reads and validates a world file (SPEC-style errors).
+/// Reads and validates a world file (errors name file, line and key).
 WorldFile load_world(const std::string& file);
 
 /// The measured end poses (start frame) of experiment i: odometry end pose + simulated error,
 /// plus measurement noise. Experiment i uses a seed derived from (seed, i).
 std::vector<Vector3> synthesize(const WorldFile& world, std::size_t experiment, int threads = 0);
 
+/// The suite document of the synthesised data (see suite_writer.hpp), and its text.
+SuiteDocument world_suite(const WorldFile& world);
 /// The suite.yaml text for the synthesised data: nominal robot, measurement noise and the
 /// experiments with their paths and CSV names (<name>.csv).
 std::string suite_yaml(const WorldFile& world);

@@ -10,7 +10,7 @@
 
 namespace odomcov::cli {
 
-/// Exit codes of ../shared/SPEC.md.
+/// Exit codes (docs/json.md, "Exit codes").
 inline constexpr int kExitOk = 0;
 inline constexpr int kExitInconsistent = 1;
 inline constexpr int kExitBadInput = 2;
@@ -24,12 +24,13 @@ void setup_fit(CLI::App& app, int& exit_code);
 void setup_umbmark(CLI::App& app, int& exit_code);
 void setup_import(CLI::App& app, int& exit_code);
 void setup_diagnose(CLI::App& app, int& exit_code);
+void setup_predict(CLI::App& app, int& exit_code);
 
-/// The report and JSON of `compare` (SPEC "JSON of compare"), shared with `diagnose`.
+/// The report and JSON of `compare` (docs/json.md, "compare"), shared with `diagnose`.
 std::string comparison_text(const Suite& suite, const Comparison& c);
 nlohmann::json comparison_json(const Suite& suite, const Comparison& c);
 
-/// The JSON of `run` (SPEC "JSON of run"), shared with `sweep`.
+/// The JSON of `run` (docs/json.md, "run"), shared with `sweep`.
 nlohmann::json validation_json(const std::string& name, const Validation& v);
 
 }  // namespace odomcov::cli

@@ -149,7 +149,7 @@ int run_diagnose(const DiagnoseOptions& opt) {
                    {"after", after},
                    {"explained", d.explained},
                    {"odometry_correction", correction}};
-    if (!d.explained) report["residuals"] = residuals;  // the SPEC: there whenever not explained
+    if (!d.explained) report["residuals"] = residuals;  // docs/json.md: there whenever not explained
     write_json_atomic(opt.json, report);
   }
   return kExitOk;

@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   setup_umbmark(app, exit_code);
   setup_diagnose(app, exit_code);
   setup_import(app, exit_code);
+  setup_predict(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -88,7 +88,8 @@ void check_output_path(const std::string& path) {
 
 void check_output_dir(const std::string& dir) {
   namespace fs = std::filesystem;
-  const fs::path path(dir);
+  fs::path path(dir);
+  if (!path.has_filename() && path.has_parent_path()) path = path.parent_path();  // "lab/" -> "lab"
   const fs::path parent = path.has_parent_path() ? path.parent_path() : fs::path(".");
   if (!fs::is_directory(parent)) throw UsageError("--out: directory " + parent.string() + " does not exist");
   if (fs::exists(path) && !fs::is_directory(path)) throw UsageError("--out: " + dir + " is not a directory");

@@ -24,7 +24,7 @@ std::string fixed(double value, int precision);
 std::string matrix_rows(const Matrix3& m, const std::string& indent, int precision = 4);
 
 
-/// The {mean, cov, std, corr} block of ../shared/SPEC.md.
+/// The {mean, cov, std, corr} block (docs/json.md, "run").
 json moments_json(const Vector3& mean, const Matrix3& cov);
 
 /// [Kleeman95] §7 layout: "mean is:", "covariance matrix is:", "stand dev, correlation matrix

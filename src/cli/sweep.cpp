@@ -1,6 +1,6 @@
 // odomcov sweep SWEEP.yaml [--out CSV] [--shard I/N] [--threads T] [--alpha A] [--order 1|2]
 //               [--json FILE]
-// One Monte-Carlo validation per grid point, one CSV row each (SPEC "Sweep file").
+// One Monte-Carlo validation per grid point, one CSV row each (docs/formats.md, "Sweep file").
 #include <csignal>
 #include <fstream>
 #include <iostream>

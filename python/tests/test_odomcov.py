@@ -1,0 +1,85 @@
+"""pytest tests of the odomcov Python module (run by ctest as `python_tests`)."""
+import os
+
+import numpy as np
+import pytest
+
+import odomcov
+
+ROOT = os.environ.get("ODOMCOV_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", ".."))
+FIG7 = os.path.join(ROOT, "configs", "kleeman95", "fig7.yaml")
+FIG9 = os.path.join(ROOT, "configs", "kleeman95", "fig9.yaml")
+
+
+def per_sample_travel(path, rate_hz):
+    """Cumulative wheel travel sampled at rate_hz, with every keyframe time among the samples;
+    returns (left, right, index of each keyframe)."""
+    t_all, left, right, index = [], [], [], [0]
+    for (t0, l0, r0), (t1, l1, r1) in zip(path[:-1], path[1:]):
+        n = max(1, int(round((t1 - t0) * rate_hz)))
+        for k in range(0 if not t_all else 1, n + 1):
+            f = k / n
+            t_all.append(t0 + f * (t1 - t0))
+            left.append(l0 + f * (l1 - l0))
+            right.append(r0 + f * (r1 - r0))
+        index.append(len(t_all) - 1)
+    return np.array(left), np.array(right), index
+
+
+@pytest.mark.parametrize("config", [FIG7, FIG9])
+@pytest.mark.parametrize("rate_hz", [7.0, 200.0])
+def test_predict_matches_closed_form_at_keyframes(config, rate_hz):
+    theory = odomcov.theory(config)
+    left, right, index = per_sample_travel(theory["path"], rate_hz)
+    out = odomcov.predict(left, right, theory["wheelbase"], theory["k_left"], theory["k_right"])
+    assert out["pose"].shape == (len(left), 3)
+    assert out["cov"].shape == (len(left), 3, 3)
+    for i, k in zip(index, theory["keyframes"]):
+        cov, expected = out["cov"][i], k["cov"]
+        scale = max(np.abs(expected).max(), 1e-300)
+        assert np.abs(cov - expected).max() <= 1e-9 * scale or i == 0
+        assert np.allclose(out["pose"][i], k["pose"], rtol=0, atol=1e-12)
+        assert np.array_equal(cov, cov.T)
+
+
+def test_predict_with_effects_uses_the_engine():
+    left = np.linspace(0, 4, 401)
+    right = np.linspace(0, 4, 401)
+    plain = odomcov.predict(left, right, 0.5, 1e-3, 1e-3)
+    eff = odomcov.predict(left, right, 0.5, 1e-3, 1e-3, effects=[{"wheel_diameter_ratio": {"Ed": 1.01}}])
+    # unequal diameters turn a straight encoder path: a heading mean of about (Ed-1)/(Ed+1) * 2 L / B
+    heading_mean = eff["mean"][-1, 2]
+    assert heading_mean == pytest.approx(2 * 0.01 / 2.01 * 4 / 0.5, rel=1e-6)
+    assert np.abs(plain["mean"]).max() == 0
+    with pytest.raises(ValueError):
+        odomcov.predict(left, right, 0.5, 1e-3, 1e-3, effects=[{"wheel_diamter_ratio": {"Ed": 1.0}}])
+
+
+def test_step_api():
+    odo = odomcov.OdometryCovariance(0.5, 1e-3, 2e-3)
+    s = odo.step(1.0, 1.2)
+    assert s.J_out_in.shape == (3, 3) and s.J_out_wheels.shape == (3, 2)
+    assert np.allclose(odo.cov, s.Q)  # the start is exactly known
+    d, a = 1.1, 0.2 / 0.5
+    assert np.allclose(s.pose, odomcov.arc_displacement(d, a))
+
+
+def test_simulate_is_thread_invariant():
+    a = odomcov.simulate(FIG7, runs=2000, seed=5, threads=1)
+    b = odomcov.simulate(FIG7, runs=2000, seed=5, threads=2)
+    assert np.array_equal(a["cov"], b["cov"]) and np.array_equal(a["mean"], b["mean"])
+    e = odomcov.simulate(FIG7, runs=50, seed=5, threads=2, errors=True)
+    assert e["errors"].shape == (50, 3)
+
+
+def test_suite_commands(tmp_path):
+    suite = odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "good_logs.yaml"))
+    c = odomcov.compare(suite)
+    assert [e["name"] for e in c["experiments"]] == suite.experiments
+    assert c["verdict"] in ("consistent", "inconsistent", "untestable")
+    f = odomcov.fit(suite, ["k_left"])
+    assert "k_left" in f["parameters"] and f["log_likelihood_after"] >= f["log_likelihood_before"] - 1e-9
+    with pytest.raises(ValueError):
+        odomcov.fit(suite, ["k_lft"])
+    with pytest.raises(ValueError):
+        odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "nan.yaml"))
