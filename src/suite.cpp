@@ -49,6 +49,7 @@ SuiteRun load_log(const std::string& log_file) {
     if (i > 0) {
       if (!(ti > t)) csv::fail(log_file, row.line, "t", "time must increase strictly");
       run.pieces.push_back({li - left, ri - right});
+      run.durations_s.push_back(ti - t);
     }
     t = ti, left = li, right = ri;
     const bool has_x = !row.empty(3), has_y = !row.empty(4), has_theta = !row.empty(5);
@@ -64,7 +65,8 @@ SuiteRun load_log(const std::string& log_file) {
   if (reference_line == 0) {
     csv::fail(log_file, table.rows.back().line, "x,y,theta", "the log has no reference pose");
   }
-  run.pieces.resize(reference_pieces);  // the model covers the path up to the last reference
+  run.pieces.resize(reference_pieces);
+  run.durations_s.resize(reference_pieces);  // the model covers the path up to the last reference
   return run;
 }
 

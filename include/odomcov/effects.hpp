@@ -9,6 +9,9 @@
 
 namespace odomcov {
 
+/// At most this many effects in one list: each has its own random-stream slot (random.hpp).
+inline constexpr std::size_t kMaxEffects = 16;
+
 /// One effect with its parameter values, in the catalogue's parameter order.
 struct EffectSpec {
   std::string name;

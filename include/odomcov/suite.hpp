@@ -33,6 +33,7 @@ struct SuiteRun {
   std::string id;                   // the CSV's run column, or the log file's name
   Vector3 measured = Vector3::Zero();  // reference end pose, start frame
   std::vector<ArcSegment> pieces;   // logged runs: one piece per log row up to the reference
+  std::vector<double> durations_s;  // logged runs: each piece's duration (t column differences)
 };
 
 struct SuiteExperiment {
