@@ -173,9 +173,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
   const double B = robot.wheelbase_m;
   MotionTracker tracker(B);
   out.pieces.reserve(encoder_pieces.size());
-  for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
-    const ArcSegment& encoder = encoder_pieces[i];
-    const double dt = durations_s.empty() ? std::nan("") : durations_s[i];
+  auto add_piece = [&](const ArcSegment& encoder, double dt) {
     PieceModel m;
     m.encoder = encoder;
     m.wheelbase_m = B;
@@ -205,6 +203,22 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
       r.input_columns.col(c) = to_input * m.run_columns.at(static_cast<std::size_t>(c));
     }
     out.pieces.push_back(std::move(r));
+  };
+  for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
+    ArcSegment rest = encoder_pieces[i];
+    double dt = durations_s.empty() ? std::nan("") : durations_s[i];
+    // A history effect may change its factors inside the piece (backlash taken up): split there.
+    for (int cut = 0; cut < 4; ++cut) {
+      MotionTracker probe = tracker;
+      const Motion whole = probe.next(rest.left_m, rest.right_m, dt);
+      double f = 1.0;
+      for (const auto& e : active) f = std::min(f, e->split_at(whole));
+      if (!(f > 1e-12 && f < 1.0 - 1e-12)) break;
+      add_piece({f * rest.left_m, f * rest.right_m}, f * dt);
+      rest = {(1.0 - f) * rest.left_m, (1.0 - f) * rest.right_m};
+      dt *= 1.0 - f;
+    }
+    add_piece(rest, dt);
   }
   for (auto& e : active) {
     if (e->measures()) out.measurement_effects.push_back(std::shared_ptr<const Effect>(std::move(e)));

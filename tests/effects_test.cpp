@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
+#include <cstdio>
 #include <random>
 
 #include "odomcov/config.hpp"
@@ -28,6 +29,8 @@ TEST_P(EffectConfig, ModelWithTheEffectPassesAndWithoutIsRejected) {
   const Vector3 b = with.noise_induced_mean;
   ASSERT_LT(b.dot(with.theory_cov.llt().solve(b)) * static_cast<double>(with.runs), 0.25)
       << GetParam() << ": effect too large for first-order theory at this run count";
+  std::printf("%s: with the effect p_mean %.4g p_cov %.4g\n",
+              GetParam().c_str(), with.mean_test.p_value, with.cov_test.p_value);
   EXPECT_EQ(with.verdict, "consistent")
       << GetParam() << ": p_mean " << with.mean_test.p_value << ", p_cov " << with.cov_test.p_value;
 
@@ -35,22 +38,30 @@ TEST_P(EffectConfig, ModelWithTheEffectPassesAndWithoutIsRejected) {
   plain.model_effects.clear();
   const Validation without = validate(plain, kAlpha);
   EXPECT_EQ(without.simulation.mean, with.simulation.mean);  // the same simulated world
+  std::printf("%s: without the effect p_mean %.3g p_cov %.3g\n", GetParam().c_str(),
+              without.mean_test.p_value, without.cov_test.p_value);
   EXPECT_EQ(without.verdict, "inconsistent")
       << GetParam() << ": p_mean " << without.mean_test.p_value << ", p_cov "
       << without.cov_test.p_value;
 }
 
-INSTANTIATE_TEST_SUITE_P(Catalogue, EffectConfig,
-                         ::testing::Values("wheel_diameter_ratio", "wheelbase_error",
-                                           "scale_error", "wheel_noise_correlation", "turn_slip",
-                                           "per_run_radius", "bumps"));
+/// Every registered effect, from the registry: each must ship configs/effects/<name>.yaml.
+std::vector<std::string> catalogue_names() {
+  std::vector<std::string> names;
+  for (const EffectInfo& e : effect_catalogue()) names.push_back(e.name);
+  return names;
+}
+
+INSTANTIATE_TEST_SUITE_P(Catalogue, EffectConfig, ::testing::ValuesIn(catalogue_names()),
+                         [](const auto& info) { return info.param; });
 
 TEST(Effects, CatalogueMatchesSpec) {
   std::vector<std::string> names;
   for (const EffectInfo& e : effect_catalogue()) names.push_back(e.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"wheel_diameter_ratio", "wheelbase_error",
-                                             "scale_error", "wheel_noise_correlation",
-                                             "turn_slip", "per_run_radius", "bumps"}));
+  EXPECT_EQ(names, (std::vector<std::string>{
+                       "wheel_diameter_ratio", "wheelbase_error", "scale_error",
+                       "wheel_noise_correlation", "turn_slip", "per_run_radius", "bumps",
+                       "turn_dependent_wheelbase", "backlash", "reference_offset"}));
   EXPECT_EQ(find_effect("bumps")->parameters[0].name, "rate");
   EXPECT_EQ(find_effect("bumps")->parameters[1].name, "sigma");
   EXPECT_EQ(check_effect({"wheel_noise_correlation", {1.0}}), "rho must be in (-1, 1), got 1");

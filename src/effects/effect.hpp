@@ -152,6 +152,12 @@ class Effect {
   virtual void systematic(const Motion& motion, Systematic& factors) const {
     (void)motion, (void)factors;
   }
+  /// Model side, for history effects: the fraction in (0, 1] of this piece after which the
+  /// factors change (backlash: where the play is taken up); resolve splits the piece there.
+  virtual double split_at(const Motion& motion) const {
+    (void)motion;
+    return 1.0;
+  }
   /// End-of-path hook on what the external reference measures (world side): `pose` is the true
   /// end pose in the start frame; the effect turns it into the measured one.
   virtual void measure(Vector3& pose) const { (void)pose; }
