@@ -18,7 +18,7 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 /// One fitted parameter: where it lives in the model and the coordinate the optimiser sees.
 struct Handle {
   enum class Kind { k_left, k_right, wheelbase, effect };
-  enum class Transform { log, atanh, sqrt };
+  enum class Transform { log, atanh, sqrt, identity };
   std::string name;
   Kind kind = Kind::k_left;
   std::string effect;
@@ -44,6 +44,7 @@ struct Handle {
       case Transform::log: return std::log(v);
       case Transform::atanh: return std::atanh(v);
       case Transform::sqrt: return std::sqrt(std::max(v, 0.0));
+      case Transform::identity: return v;
     }
     return v;
   }
@@ -52,6 +53,7 @@ struct Handle {
       case Transform::log: return std::exp(u);
       case Transform::atanh: return std::tanh(u);
       case Transform::sqrt: return u * u;
+      case Transform::identity: return u;
     }
     return u;
   }
@@ -60,6 +62,7 @@ struct Handle {
       case Transform::log: return std::exp(u);
       case Transform::atanh: return 1.0 - std::tanh(u) * std::tanh(u);
       case Transform::sqrt: return 2.0 * u;
+      case Transform::identity: return 1.0;
     }
     return 1.0;
   }
@@ -95,7 +98,12 @@ Handle make_handle(const std::string& name, const SuiteModel& model) {
   }
   const EffectParameterInfo& p = info->parameters[h.index];
   const double scale = std::abs(p.typical - p.neutral);
-  if (p.open_lower && p.lower == 0.0) {  // positive scale factors (Ed, Eb, Es)
+  if (p.lower <= -1e300 && p.upper >= 1e300) {  // signed and unbounded (reference_offset.dx)
+    h.transform = Handle::Transform::identity;
+    h.lower_u = p.neutral - 1e4 * scale;
+    h.upper_u = p.neutral + 1e4 * scale;
+    h.step_u = std::max(scale, 1e-6);
+  } else if (p.open_lower && p.lower == 0.0) {  // positive scale factors (Ed, Eb, Es)
     h.transform = Handle::Transform::log;
     h.lower_u = std::log(0.5);
     h.upper_u = std::log(2.0);

@@ -264,7 +264,16 @@ struct Simulator::Impl {
       if (effects[e]->measures()) measuring.push_back(effects[e].get());
     }
     legs = make_legs(path, robot, effects);
-    for (const Leg& leg : legs) samples += leg.count;
+    double max_travel = 0.0;
+    for (const Leg& leg : legs) {
+      samples += leg.count;
+      max_travel = std::max(max_travel, 0.5 * (std::abs(leg.encoder.left_m) + std::abs(leg.encoder.right_m)));
+    }
+    for (std::size_t e = 0; e < effects.size(); ++e) {
+      if (const std::string why = effects[e]->check_samples(max_travel); !why.empty()) {
+        throw EffectError("effects[" + std::to_string(e) + "]." + effect_list[e].name, why);
+      }
+    }
     // The odometry: the nominal motion through the same integrator with zero noise, so with
     // no effects and k = 0 the error is exactly zero.
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};

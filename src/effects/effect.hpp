@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "odomcov/closed_form.hpp"
@@ -167,6 +168,12 @@ class Effect {
     (void)pose, (void)J_measured_true;
   }
   virtual bool measures() const { return false; }
+  /// World side: "" when the effect can be simulated exactly on samples of at most this mean
+  /// wheel travel (|dL| + |dR|)/2, else why not (bumps: too many per sample).
+  virtual std::string check_samples(double max_mean_travel_m) const {
+    (void)max_mean_travel_m;
+    return "";
+  }
 
   // ---- World side: randomness -----------------------------------------------------------------
   /// True when the hooks below do anything (the simulator then runs its general kernel).
@@ -228,7 +235,10 @@ struct EffectType {
 /// The registry (registry.cpp): every effect, in SPEC order.
 const std::vector<EffectType>& registry();
 
-/// Builds effect objects from specs (which must have passed check_effect).
+/// Builds effect objects from specs; throws EffectError (check_effects) for an invalid list.
 std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list);
+
+/// The registry entry of a name; throws EffectError when unknown.
+const EffectType& type_of(const std::string& name);
 
 }  // namespace odomcov::effects

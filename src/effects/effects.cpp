@@ -52,6 +52,20 @@ std::string effect_yaml(const EffectSpec& spec) {
   return text + "}";
 }
 
+void check_effects(const EffectList& list) {
+  if (list.size() > kMaxEffects) {
+    throw EffectError("effects", "at most " + std::to_string(kMaxEffects) + " effects, got " +
+                                     std::to_string(list.size()));
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string key = "effects[" + std::to_string(i) + "]." + list[i].name;
+    if (const std::string error = check_effect(list[i]); !error.empty()) throw EffectError(key, error);
+    for (std::size_t j = 0; j < i; ++j) {
+      if (list[j].name == list[i].name) throw EffectError(key, "effect listed twice");
+    }
+  }
+}
+
 namespace effects {
 
 Motion MotionTracker::next(double dL_m, double dR_m, double dt_s, std::int64_t count) {
@@ -95,13 +109,17 @@ void ResolvedPath::measure(Vector3& pose, Matrix3& P_world) const {
   P_world = J * P_world * J.transpose();
 }
 
-std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
-  std::vector<std::unique_ptr<Effect>> out;
-  for (const EffectSpec& spec : list) {
-    for (const EffectType& t : registry()) {
-      if (t.info.name == spec.name) out.push_back(t.make(spec.values));
-    }
+const EffectType& type_of(const std::string& name) {
+  for (const EffectType& t : registry()) {
+    if (t.info.name == name) return t;
   }
+  throw EffectError("effects", "unknown effect '" + name + "'");
+}
+
+std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
+  check_effects(list);
+  std::vector<std::unique_ptr<Effect>> out;
+  for (const EffectSpec& spec : list) out.push_back(type_of(spec.name).make(spec.values));
   return out;
 }
 
