@@ -26,6 +26,7 @@ struct Handle {
   Transform transform = Transform::log;
   double lower_u = -HUGE_VAL, upper_u = HUGE_VAL;
   double step_u = 0.1;  // BOBYQA's initial step
+  double mid = 0.0, half = 1.0;  // atanh: the open interval (mid - half, mid + half)
 
   double& ref(SuiteModel& m) const {
     switch (kind) {
@@ -42,7 +43,7 @@ struct Handle {
   double to_u(double v) const {
     switch (transform) {
       case Transform::log: return std::log(v);
-      case Transform::atanh: return std::atanh(v);
+      case Transform::atanh: return std::atanh((v - mid) / half);
       case Transform::sqrt: return std::sqrt(std::max(v, 0.0));
       case Transform::identity: return v;
     }
@@ -51,7 +52,7 @@ struct Handle {
   double from_u(double u) const {
     switch (transform) {
       case Transform::log: return std::exp(u);
-      case Transform::atanh: return std::tanh(u);
+      case Transform::atanh: return mid + half * std::tanh(u);
       case Transform::sqrt: return u * u;
       case Transform::identity: return u;
     }
@@ -60,7 +61,7 @@ struct Handle {
   double dv_du(double u) const {
     switch (transform) {
       case Transform::log: return std::exp(u);
-      case Transform::atanh: return 1.0 - std::tanh(u) * std::tanh(u);
+      case Transform::atanh: return half * (1.0 - std::tanh(u) * std::tanh(u));
       case Transform::sqrt: return 2.0 * u;
       case Transform::identity: return 1.0;
     }
@@ -108,8 +109,10 @@ Handle make_handle(const std::string& name, const SuiteModel& model) {
     h.lower_u = std::log(0.5);
     h.upper_u = std::log(2.0);
     h.step_u = std::max(scale, 1e-3);
-  } else if (p.open_lower && p.open_upper) {  // a correlation in (-1, 1)
+  } else if (p.open_lower && p.open_upper) {  // an open interval (a, b), e.g. rho in (-1, 1)
     h.transform = Handle::Transform::atanh;
+    h.mid = 0.5 * (p.lower + p.upper);
+    h.half = 0.5 * (p.upper - p.lower);
     h.lower_u = -6.0;
     h.upper_u = 6.0;
     h.step_u = 0.3;
