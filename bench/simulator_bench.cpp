@@ -40,6 +40,27 @@ BENCHMARK(BM_SimulatorTable3)
     ->UseRealTime()
     ->MinTime(2.0);
 
+// The general (scalar) kernel: a world with stochastic effects (slip while turning and
+// correlated wheel noise) on the configs/effects/turn_slip.yaml path (~11 m at 50 Hz).
+void BM_SimulatorGeneral(benchmark::State& state) {
+  static const odomcov::Config c =
+      odomcov::load_config(ODOMCOV_SOURCE_DIR "/configs/effects/turn_slip.yaml");
+  const odomcov::EffectList effects{{"turn_slip", {0.0015}}, {"wheel_noise_correlation", {0.3}}};
+  const odomcov::Simulator sim(c.world_robot(), c.path, effects);
+  const std::int64_t runs = 2048;
+  std::uint64_t seed = 1;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(sim.simulate(runs, seed++, 1).mean());
+  }
+  const double steps = static_cast<double>(runs * sim.samples_per_run());
+  state.counters["steps/s"] =
+      benchmark::Counter(steps, benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["threads"] = 1;
+  state.SetLabel("general kernel");
+}
+
+BENCHMARK(BM_SimulatorGeneral)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
 }  // namespace
 
 BENCHMARK_MAIN();

@@ -18,7 +18,7 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 /// One fitted parameter: where it lives in the model and the coordinate the optimiser sees.
 struct Handle {
   enum class Kind { k_left, k_right, wheelbase, effect };
-  enum class Transform { log, atanh, sqrt };
+  enum class Transform { log, atanh, sqrt, identity };
   std::string name;
   Kind kind = Kind::k_left;
   std::string effect;
@@ -26,6 +26,7 @@ struct Handle {
   Transform transform = Transform::log;
   double lower_u = -HUGE_VAL, upper_u = HUGE_VAL;
   double step_u = 0.1;  // BOBYQA's initial step
+  double mid = 0.0, half = 1.0;  // atanh: the open interval (mid - half, mid + half)
 
   double& ref(SuiteModel& m) const {
     switch (kind) {
@@ -42,24 +43,27 @@ struct Handle {
   double to_u(double v) const {
     switch (transform) {
       case Transform::log: return std::log(v);
-      case Transform::atanh: return std::atanh(v);
+      case Transform::atanh: return std::atanh((v - mid) / half);
       case Transform::sqrt: return std::sqrt(std::max(v, 0.0));
+      case Transform::identity: return v;
     }
     return v;
   }
   double from_u(double u) const {
     switch (transform) {
       case Transform::log: return std::exp(u);
-      case Transform::atanh: return std::tanh(u);
+      case Transform::atanh: return mid + half * std::tanh(u);
       case Transform::sqrt: return u * u;
+      case Transform::identity: return u;
     }
     return u;
   }
   double dv_du(double u) const {
     switch (transform) {
       case Transform::log: return std::exp(u);
-      case Transform::atanh: return 1.0 - std::tanh(u) * std::tanh(u);
+      case Transform::atanh: return half * (1.0 - std::tanh(u) * std::tanh(u));
       case Transform::sqrt: return 2.0 * u;
+      case Transform::identity: return 1.0;
     }
     return 1.0;
   }
@@ -95,13 +99,20 @@ Handle make_handle(const std::string& name, const SuiteModel& model) {
   }
   const EffectParameterInfo& p = info->parameters[h.index];
   const double scale = std::abs(p.typical - p.neutral);
-  if (p.open_lower && p.lower == 0.0) {  // positive scale factors (Ed, Eb, Es)
+  if (p.lower <= -1e300 && p.upper >= 1e300) {  // signed and unbounded (reference_offset.dx)
+    h.transform = Handle::Transform::identity;
+    h.lower_u = p.neutral - 1e4 * scale;
+    h.upper_u = p.neutral + 1e4 * scale;
+    h.step_u = std::max(scale, 1e-6);
+  } else if (p.open_lower && p.lower == 0.0) {  // positive scale factors (Ed, Eb, Es)
     h.transform = Handle::Transform::log;
     h.lower_u = std::log(0.5);
     h.upper_u = std::log(2.0);
     h.step_u = std::max(scale, 1e-3);
-  } else if (p.open_lower && p.open_upper) {  // a correlation in (-1, 1)
+  } else if (p.open_lower && p.open_upper) {  // an open interval (a, b), e.g. rho in (-1, 1)
     h.transform = Handle::Transform::atanh;
+    h.mid = 0.5 * (p.lower + p.upper);
+    h.half = 0.5 * (p.upper - p.lower);
     h.lower_u = -6.0;
     h.upper_u = 6.0;
     h.step_u = 0.3;

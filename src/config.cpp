@@ -114,7 +114,7 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     }
     list.push_back(std::move(spec));
   }
-  if (list.size() > 16) yaml::fail(where, node, "at most 16 effects");
+  if (list.size() > kMaxEffects) yaml::fail(where, node, "at most " + std::to_string(kMaxEffects) + " effects");
   return list;
 }
 

@@ -25,8 +25,10 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     const SuiteExperiment& ex = suite.experiments[e];
     out[e].resize(ex.runs.size());
     if (!ex.logged) {
+      std::vector<double> durations;
+      const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
       const Prediction p =
-          predict_with_order(model_pieces(ex.path, B), model.robot, model.effects, model.order);
+          predict_with_order(pieces, durations, model.robot, model.effects, model.order);
       const Vector3 odometry = sampled_end_pose(ex.path, B);
       for (std::size_t r = 0; r < ex.runs.size(); ++r) {
         out[e][r] = {pose_error(ex.runs[r].measured, odometry), p.mean + p.noise_mean,
@@ -36,7 +38,8 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     }
     tbb::parallel_for(std::size_t{0}, ex.runs.size(), [&](std::size_t r) {
       const Prediction p =
-          predict_with_order(ex.runs[r].pieces, model.robot, model.effects, model.order);
+          predict_with_order(ex.runs[r].pieces, ex.runs[r].durations_s, model.robot,
+                             model.effects, model.order);
       out[e][r] = {pose_error(ex.runs[r].measured, p.odometry_end_pose), p.mean + p.noise_mean,
                    p.cov + meas};
     });

@@ -118,13 +118,13 @@ std::vector<SampleRun> sample_schedule(const Path& path) {
     if (end_in_k > i) {
       const double span = kf[k + 1].t_s - kf[k].t_s;
       const ArcSegment seg = path.interval(k);
-      runs.push_back({end_in_k - i, {seg.left_m / (span * f), seg.right_m / (span * f)}});
+      runs.push_back({end_in_k - i, {seg.left_m / (span * f), seg.right_m / (span * f)}, 1.0 / f});
       i = end_in_k;
       continue;
     }
     // A sample that straddles a keyframe, or the final short sample.
     const double t1 = std::min(static_cast<double>(i + 1) / f, T);
-    runs.push_back({1, travel(t0, t1)});
+    runs.push_back({1, travel(t0, t1), t1 - t0});
     ++i;
   }
   return runs;

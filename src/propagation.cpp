@@ -120,46 +120,55 @@ Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
   return {mean.real(), mean.imag(), 0.0};
 }
 
-std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m) {
+std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m,
+                                     std::vector<double>* durations_s) {
   std::vector<ArcSegment> pieces;
+  if (durations_s) durations_s->clear();
   for (std::size_t i = 0; i < path.interval_count(); ++i) {
     const ArcSegment seg = path.interval(i);
     const double cuts = std::max({1.0, std::ceil(std::abs(seg.heading_change_rad(wheelbase_m)) / kPieceMaxAngle),
                                   std::ceil(std::abs(seg.center_m()) / kPieceMaxTravel)});
     const int n = static_cast<int>(cuts);
-    for (int k = 0; k < n; ++k) pieces.push_back({seg.left_m / n, seg.right_m / n});
+    const double span = path.keyframes[i + 1].t_s - path.keyframes[i].t_s;
+    for (int k = 0; k < n; ++k) {
+      pieces.push_back({seg.left_m / n, seg.right_m / n});
+      if (durations_s) durations_s->push_back(span / n);
+    }
   }
   return pieces;
 }
 
 namespace effects {
 
-ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces, const Robot& robot,
+ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
+                     const std::vector<double>& durations_s, const Robot& robot,
                      const EffectList& effect_list) {
-  const auto active = instantiate(effect_list);
+  auto active = instantiate(effect_list);
   ResolvedPath out;
-  double scale_left = 1.0, scale_right = 1.0, wheelbase_factor = 1.0;
   for (const auto& e : active) {
     out.run_constants += e->run_constants();
-    e->systematic(scale_left, scale_right, wheelbase_factor);
   }
   const double B = robot.wheelbase_m;
+  MotionTracker tracker(B);
   out.pieces.reserve(encoder_pieces.size());
-  for (const ArcSegment& encoder : encoder_pieces) {
+  auto add_piece = [&](const ArcSegment& encoder, double dt) {
     PieceModel m;
     m.encoder = encoder;
     m.wheelbase_m = B;
     m.noise = robot.noise;
-    m.scale_left = scale_left;
-    m.scale_right = scale_right;
-    m.wheelbase_factor = wheelbase_factor;
+    m.motion = tracker.next(encoder.left_m, encoder.right_m, dt);
+    Systematic sys;
+    for (const auto& e : active) e->systematic(m.motion, sys);
+    m.scale_left = sys.scale_left;
+    m.scale_right = sys.scale_right;
+    m.wheelbase_factor = sys.wheelbase_factor;
     m.wheel_cov.diagonal() << robot.noise.k_left * robot.noise.k_left * std::abs(encoder.left_m),
         robot.noise.k_right * robot.noise.k_right * std::abs(encoder.right_m);
     for (const auto& e : active) e->model(m);
 
     ResolvedPiece r;
     r.encoder = encoder;
-    const ArcSegment travel{m.scale_left * encoder.left_m, m.scale_right * encoder.right_m};
+    const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
     r.wheelbase_true_m = m.wheelbase_factor * B;
     r.center_m = travel.center_m();
     r.angle_rad = travel.heading_change_rad(r.wheelbase_true_m);
@@ -172,6 +181,25 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces, const Robot&
       r.input_columns.col(c) = to_input * m.run_columns.at(static_cast<std::size_t>(c));
     }
     out.pieces.push_back(std::move(r));
+  };
+  for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
+    ArcSegment rest = encoder_pieces[i];
+    double dt = durations_s.empty() ? std::nan("") : durations_s[i];
+    // A history effect may change its factors inside the piece (backlash taken up): split there.
+    for (int cut = 0; cut < 4; ++cut) {
+      MotionTracker probe = tracker;
+      const Motion whole = probe.next(rest.left_m, rest.right_m, dt);
+      double f = 1.0;
+      for (const auto& e : active) f = std::min(f, e->split_at(whole));
+      if (!(f > 1e-12 && f < 1.0 - 1e-12)) break;
+      add_piece({f * rest.left_m, f * rest.right_m}, f * dt);
+      rest = {(1.0 - f) * rest.left_m, (1.0 - f) * rest.right_m};
+      dt *= 1.0 - f;
+    }
+    add_piece(rest, dt);
+  }
+  for (auto& e : active) {
+    if (e->measures()) out.measurement_effects.push_back(std::shared_ptr<const Effect>(std::move(e)));
   }
   return out;
 }
@@ -182,9 +210,9 @@ namespace {
 
 /// The engine's loop; `each` (when not nullptr) sees the prediction after every piece.
 template <class Each>
-Prediction propagate(const std::vector<ArcSegment>& pieces, const Robot& robot,
-                     const EffectList& effect_list, Each&& each) {
-  const effects::ResolvedPath path = effects::resolve(pieces, robot, effect_list);
+Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                     const Robot& robot, const EffectList& effect_list, Each&& each) {
+  const effects::ResolvedPath path = effects::resolve(pieces, durations_s, robot, effect_list);
   const int constants = path.run_constants;
   const double B = robot.wheelbase_m;
 
@@ -214,9 +242,11 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const Robot& robot,
   }
   out.odometry_end_pose = odometry;
   out.true_end_pose = true_pose;
-  out.mean = pose_error(true_pose, odometry);
-  out.noise_mean = {noise_mean.real(), noise_mean.imag(), 0.0};
   out.cov = tangential_to_world(P, true_pose.z());
+  Vector3 measured = true_pose;
+  path.measure(measured, out.cov);  // what the external reference sees (reference_offset)
+  out.mean = pose_error(measured, odometry);
+  out.noise_mean = {noise_mean.real(), noise_mean.imag(), 0.0};
   return out;
 }
 
@@ -224,7 +254,12 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const Robot& robot,
 
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effect_list) {
-  return propagate(pieces, robot, effect_list, nullptr);
+  return propagate(pieces, {}, robot, effect_list, nullptr);
+}
+
+Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                   const Robot& robot, const EffectList& effect_list) {
+  return propagate(pieces, durations_s, robot, effect_list, nullptr);
 }
 
 std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,
@@ -232,7 +267,7 @@ std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces
   std::vector<Prediction> out;
   out.reserve(pieces.size() + 1);
   out.emplace_back();  // the start: exactly known
-  propagate(pieces, robot, effect_list, [&out](const Prediction& p) { out.push_back(p); });
+  propagate(pieces, {}, robot, effect_list, [&out](const Prediction& p) { out.push_back(p); });
   return out;
 }
 

@@ -198,7 +198,7 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces, double whe
 Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces, const Robot& robot,
                                 const EffectList& effects) {
   const double B = robot.wheelbase_m;
-  const effects::ResolvedPath resolved = effects::resolve(refine(encoder_pieces, B), robot, effects);
+  const effects::ResolvedPath resolved = effects::resolve(refine(encoder_pieces, B), {}, robot, effects);
   const std::size_t K = resolved.pieces.size();
   Model model;
   model.m = resolved.run_constants;
@@ -289,7 +289,6 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces, c
   Prediction out;
   out.odometry_end_pose = odometry;
   out.true_end_pose = true_pose;
-  out.mean = pose_error(true_pose, odometry);
   out.noise_mean = {noise_mean.real(), noise_mean.imag(), 0.0};
   Matrix3& P = out.cov;
   P(0, 0) = 0.5 * (cov_conj + cov_plain.real());
@@ -298,6 +297,11 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces, c
   P(0, 2) = P(2, 0) = cov_p_theta.real();
   P(1, 2) = P(2, 1) = cov_p_theta.imag();
   P(2, 2) = v_end;
+  // What the external reference sees (reference_offset), as in predict: first order in the
+  // hook's Jacobian about the mean true pose.
+  Vector3 measured = true_pose;
+  resolved.measure(measured, out.cov);
+  out.mean = pose_error(measured, odometry);
   return out;
 }
 
@@ -324,17 +328,25 @@ std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, do
   return out;
 }
 
-Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
+Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
+                              const std::vector<double>& durations_s, const Robot& robot,
                               const EffectList& effects, int order) {
-  if (order == 1) return predict(pieces, robot, effects);
+  Prediction out = predict(pieces, durations_s, robot, effects);
+  if (order == 1) return out;
+  // The order-2 correction (second order minus first order on the same, possibly coarsened,
+  // pieces) is added to the first-order prediction on the full pieces, which sees every piece's
+  // duration. Both terms of the correction pass through the same measurement hooks.
   const std::vector<ArcSegment> coarse = coarsen_pieces(pieces, robot.wheelbase_m);
-  if (coarse.size() == pieces.size()) return predict_second_order(pieces, robot, effects);
-  Prediction out = predict(pieces, robot, effects);
   const Prediction coarse2 = predict_second_order(coarse, robot, effects);
   const Prediction coarse1 = predict(coarse, robot, effects);
-  out.noise_mean = coarse2.mean + coarse2.noise_mean - coarse1.mean;
+  out.noise_mean += coarse2.mean + coarse2.noise_mean - coarse1.mean - coarse1.noise_mean;
   out.cov += coarse2.cov - coarse1.cov;
   return out;
+}
+
+Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                              const EffectList& effects, int order) {
+  return predict_with_order(pieces, {}, robot, effects, order);
 }
 
 }  // namespace odomcov

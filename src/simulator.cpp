@@ -6,6 +6,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -54,7 +55,9 @@ struct Leg {
   double sigma_left = 0.0;   // kL sqrt|L|
   double sigma_right = 0.0;  // kR sqrt|R|
   double inv_two_b = 0.0;
+  double wheelbase_true = 0.0;
   bool series_sinc = true;  // most lanes have |h| <= kSincSeriesMax
+  effects::Motion motion;   // of the leg's first sample
 };
 
 template <class V>
@@ -193,46 +196,89 @@ struct Simulator::Impl {
   std::vector<Leg> legs;           // the true motion: systematic effects folded in
   std::vector<std::unique_ptr<effects::Effect>> effects;
   std::vector<std::uint32_t> random_effects;  // indices of the effects with per-run/sample hooks
-  double wheelbase_true = 0.0;
+  std::vector<const effects::Effect*> measuring;  // effects with a measurement hook
   std::int64_t samples = 0;
   Vector3 odometry_pose = Vector3::Zero();
 
-  static std::vector<Leg> make_legs(const Path& path, const Robot& robot, double scale_left,
-                                    double scale_right, double wheelbase_true) {
+  static Leg make_leg(std::int64_t count, const ArcSegment& increment, const effects::Motion& motion,
+                      const effects::Systematic& sys, const Robot& robot) {
+    Leg leg;
+    leg.count = count;
+    leg.encoder = increment;
+    leg.motion = motion;
+    leg.travel = sys.travel(increment.left_m, increment.right_m);
+    leg.wheelbase_true = sys.wheelbase_factor * robot.wheelbase_m;
+    leg.center_m = leg.travel.center_m();
+    leg.half_rad = 0.5 * leg.travel.heading_change_rad(leg.wheelbase_true);
+    leg.cos_half = std::cos(leg.half_rad);
+    leg.sin_half = std::sin(leg.half_rad);
+    leg.sigma_left = robot.noise.k_left * std::sqrt(std::abs(increment.left_m));
+    leg.sigma_right = robot.noise.k_right * std::sqrt(std::abs(increment.right_m));
+    leg.inv_two_b = 1.0 / (2.0 * leg.wheelbase_true);
+    leg.series_sinc = std::abs(leg.half_rad) <= kSincSeriesMax;
+    return leg;
+  }
+
+  /// The legs of the true motion: each sample's systematic factors from its Motion, once per
+  /// leg of equal samples when no effect depends on the history, else sample by sample with
+  /// equal neighbours merged (a leg of a planned path then splits only where the factors
+  /// change, e.g. while backlash is taken up). Built once per path, never per run.
+  static std::vector<Leg> make_legs(const Path& path, const Robot& robot,
+                                    const std::vector<std::unique_ptr<effects::Effect>>& list) {
+    effects::Dependence dependence = effects::Dependence::none;
+    for (const auto& e : list) dependence = std::max(dependence, e->dependence());
+    const bool per_sample = dependence == effects::Dependence::history;
+    auto factors = [&](const effects::Motion& m) {
+      effects::Systematic sys;
+      for (const auto& e : list) e->systematic(m, sys);
+      return sys;
+    };
+    effects::MotionTracker tracker(robot.wheelbase_m);
     std::vector<Leg> out;
+    effects::Systematic last;
     for (const SampleRun& run : sample_schedule(path)) {
-      Leg leg;
-      leg.count = run.count;
-      leg.encoder = run.increment;
-      leg.travel = {scale_left * run.increment.left_m, scale_right * run.increment.right_m};
-      leg.center_m = leg.travel.center_m();
-      leg.half_rad = 0.5 * leg.travel.heading_change_rad(wheelbase_true);
-      leg.cos_half = std::cos(leg.half_rad);
-      leg.sin_half = std::sin(leg.half_rad);
-      leg.sigma_left = robot.noise.k_left * std::sqrt(std::abs(run.increment.left_m));
-      leg.sigma_right = robot.noise.k_right * std::sqrt(std::abs(run.increment.right_m));
-      leg.inv_two_b = 1.0 / (2.0 * wheelbase_true);
-      leg.series_sinc = std::abs(leg.half_rad) <= kSincSeriesMax;
-      out.push_back(leg);
+      const ArcSegment& inc = run.increment;
+      if (!per_sample) {
+        const effects::Motion m = tracker.next(inc.left_m, inc.right_m, run.duration_s, run.count);
+        out.push_back(make_leg(run.count, inc, m, factors(m), robot));
+        continue;
+      }
+      for (std::int64_t i = 0; i < run.count; ++i) {
+        const effects::Motion m = tracker.next(inc.left_m, inc.right_m, run.duration_s);
+        const effects::Systematic sys = factors(m);
+        if (i > 0 && sys == last) {
+          ++out.back().count;
+        } else {
+          out.push_back(make_leg(1, inc, m, sys, robot));
+        }
+        last = sys;
+      }
     }
     return out;
   }
 
   Impl(const Robot& r, const Path& path, const EffectList& effect_list)
       : robot(r), effects(effects::instantiate(effect_list)) {
-    double scale_left = 1.0, scale_right = 1.0, wheelbase_factor = 1.0;
     for (std::size_t e = 0; e < effects.size(); ++e) {
-      effects[e]->systematic(scale_left, scale_right, wheelbase_factor);
       if (effects[e]->stochastic()) random_effects.push_back(static_cast<std::uint32_t>(e));
+      if (effects[e]->measures()) measuring.push_back(effects[e].get());
     }
-    wheelbase_true = wheelbase_factor * robot.wheelbase_m;
-    legs = make_legs(path, robot, scale_left, scale_right, wheelbase_true);
-    for (const Leg& leg : legs) samples += leg.count;
+    legs = make_legs(path, robot, effects);
+    double max_travel = 0.0;
+    for (const Leg& leg : legs) {
+      samples += leg.count;
+      max_travel = std::max(max_travel, 0.5 * (std::abs(leg.encoder.left_m) + std::abs(leg.encoder.right_m)));
+    }
+    for (std::size_t e = 0; e < effects.size(); ++e) {
+      if (const std::string why = effects[e]->check_samples(max_travel); !why.empty()) {
+        throw EffectError("effects[" + std::to_string(e) + "]." + effect_list[e].name, why);
+      }
+    }
     // The odometry: the nominal motion through the same integrator with zero noise, so with
     // no effects and k = 0 the error is exactly zero.
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
     std::uint32_t n = 0;
-    for (const Leg& leg : make_legs(path, robot, 1.0, 1.0, robot.wheelbase_m)) {
+    for (const Leg& leg : make_legs(path, robot, {})) {
       for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
         step(p, leg, 0.0, 0.0);
         if ((n & kRenormMask) == kRenormMask) renormalise(p);
@@ -241,8 +287,12 @@ struct Simulator::Impl {
     odometry_pose = {p.x, p.y, p.theta};
   }
 
+  /// The error the external reference sees: the true end pose through the measurement hooks,
+  /// minus the odometry.
   Vector3 error_of(double x, double y, double theta) const {
-    return pose_error({x, y, theta}, odometry_pose);
+    Vector3 pose(x, y, theta);
+    for (const effects::Effect* e : measuring) e->measure(pose);
+    return pose_error(pose, odometry_pose);
   }
 
   /// The scalar kernel: the reference for the vectorised one and, with stochastic effects,
@@ -251,11 +301,11 @@ struct Simulator::Impl {
   Vector3 scalar_run(const random::Philox::key_type& key, std::uint64_t run) const {
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
     const bool stochastic = !random_effects.empty();
-    std::vector<effects::Draws> draws;
-    std::vector<effects::RunState> states(random_effects.size());
-    draws.reserve(random_effects.size());
+    // Fixed-size per-run state (at most kMaxEffects effects): nothing is allocated per run.
+    std::array<effects::Draws, kMaxEffects> draws;
+    std::array<effects::RunState, kMaxEffects> states{};
     for (std::size_t i = 0; i < random_effects.size(); ++i) {
-      draws.emplace_back(key, run, random_effects[i]);
+      draws[i] = effects::Draws(key, run, random_effects[i]);
       effects[random_effects[i]]->begin_run(states[i], draws[i]);
     }
     std::uint32_t n = 0;
@@ -274,7 +324,7 @@ struct Simulator::Impl {
           ws.wheelbase_nominal = robot.wheelbase_m;
           ws.travel_left = leg.travel.left_m;
           ws.travel_right = leg.travel.right_m;
-          ws.wheelbase = wheelbase_true;
+          ws.wheelbase = leg.wheelbase_true;
           for (std::size_t r = 0; r < random_effects.size(); ++r) {
             effects[random_effects[r]]->perturb(ws, states[r], draws[r]);
           }

@@ -46,8 +46,10 @@ Validation validate(const Config& config, double alpha, int threads, Progress* p
     v.theory_source = "closed form [Kleeman95], first order";
     noise_mean = noise_induced_mean(config.path, config.robot);
   } else {
-    const Prediction p = predict(model_pieces(config.path, config.robot.wheelbase_m),
-                                 config.robot, config.model_effects);
+    std::vector<double> durations;
+    const std::vector<ArcSegment> pieces =
+        model_pieces(config.path, config.robot.wheelbase_m, &durations);
+    const Prediction p = predict(pieces, durations, config.robot, config.model_effects);
     v.theory_mean = p.mean;
     v.theory_cov = p.cov;
     v.theory_source = "linearised model with effects:";

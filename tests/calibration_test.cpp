@@ -125,3 +125,22 @@ TEST(Umbmark, RecoversEdAndEbWithBorensteinsSigns) {
 
 }  // namespace
 }  // namespace odomcov
+
+namespace odomcov {
+namespace {
+
+// Review defect 7: a signed, unbounded parameter got the sqrt transform and could never go
+// negative. reference_offset.dx is fitted in identity coordinates: a world whose reference sits
+// 2 cm behind the axle centre gives dx = -0.02 within 3 standard errors (alpha 0.0027).
+TEST(Fit, SignedParameterGoesNegative) {
+  WorldFile w = load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/plain.yaml");
+  w.world.effects = {{"reference_offset", {-0.02, 0.0}}};
+  const Suite suite = synth_suite(w, "signed");
+  const FitResult r = fit(suite, suite_model(suite), {"reference_offset.dx"});
+  ASSERT_TRUE(std::isfinite(r.stderrs(0))) << (r.warnings.empty() ? "" : r.warnings[0]);
+  EXPECT_LT(r.values(0), 0.0);
+  EXPECT_LT(std::abs(r.values(0) + 0.02), 3 * r.stderrs(0)) << r.values(0) << " +/- " << r.stderrs(0);
+}
+
+}  // namespace
+}  // namespace odomcov

@@ -4,11 +4,14 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
+#include <cstdio>
 #include <random>
 
 #include "odomcov/config.hpp"
 #include "odomcov/error.hpp"
 #include "odomcov/propagation.hpp"
+#include "odomcov/simulator.hpp"
+#include "effects/effect.hpp"
 #include "odomcov/validation.hpp"
 #include "test_util.hpp"
 
@@ -28,6 +31,8 @@ TEST_P(EffectConfig, ModelWithTheEffectPassesAndWithoutIsRejected) {
   const Vector3 b = with.noise_induced_mean;
   ASSERT_LT(b.dot(with.theory_cov.llt().solve(b)) * static_cast<double>(with.runs), 0.25)
       << GetParam() << ": effect too large for first-order theory at this run count";
+  std::printf("%s: with the effect p_mean %.4g p_cov %.4g\n",
+              GetParam().c_str(), with.mean_test.p_value, with.cov_test.p_value);
   EXPECT_EQ(with.verdict, "consistent")
       << GetParam() << ": p_mean " << with.mean_test.p_value << ", p_cov " << with.cov_test.p_value;
 
@@ -35,6 +40,8 @@ TEST_P(EffectConfig, ModelWithTheEffectPassesAndWithoutIsRejected) {
   plain.model_effects.clear();
   const Validation without = validate(plain, kAlpha);
   EXPECT_EQ(without.simulation.mean, with.simulation.mean);  // the same simulated world
+  std::printf("%s: without the effect p_mean %.3g p_cov %.3g\n", GetParam().c_str(),
+              without.mean_test.p_value, without.cov_test.p_value);
   EXPECT_EQ(without.verdict, "inconsistent")
       << GetParam() << ": p_mean " << without.mean_test.p_value << ", p_cov "
       << without.cov_test.p_value;
@@ -48,17 +55,23 @@ TEST_P(EffectConfig, ModelWithTheEffectPassesAndWithoutIsRejected) {
       << ", p_cov (ADF) " << without.other.cov_test.p_value;
 }
 
-INSTANTIATE_TEST_SUITE_P(Catalogue, EffectConfig,
-                         ::testing::Values("wheel_diameter_ratio", "wheelbase_error",
-                                           "scale_error", "wheel_noise_correlation", "turn_slip",
-                                           "per_run_radius", "bumps"));
+/// Every registered effect, from the registry: each must ship configs/effects/<name>.yaml.
+std::vector<std::string> catalogue_names() {
+  std::vector<std::string> names;
+  for (const EffectInfo& e : effect_catalogue()) names.push_back(e.name);
+  return names;
+}
+
+INSTANTIATE_TEST_SUITE_P(Catalogue, EffectConfig, ::testing::ValuesIn(catalogue_names()),
+                         [](const auto& info) { return info.param; });
 
 TEST(Effects, CatalogueMatchesSpec) {
   std::vector<std::string> names;
   for (const EffectInfo& e : effect_catalogue()) names.push_back(e.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"wheel_diameter_ratio", "wheelbase_error",
-                                             "scale_error", "wheel_noise_correlation",
-                                             "turn_slip", "per_run_radius", "bumps"}));
+  EXPECT_EQ(names, (std::vector<std::string>{
+                       "wheel_diameter_ratio", "wheelbase_error", "scale_error",
+                       "wheel_noise_correlation", "turn_slip", "per_run_radius", "bumps",
+                       "turn_dependent_wheelbase", "backlash", "reference_offset"}));
   EXPECT_EQ(find_effect("bumps")->parameters[0].name, "rate");
   EXPECT_EQ(find_effect("bumps")->parameters[1].name, "sigma");
   EXPECT_EQ(check_effect({"wheel_noise_correlation", {1.0}}), "rho must be in (-1, 1), got 1");
@@ -141,6 +154,76 @@ TEST(Effects, BadEffectsAreRejectedWithTheirKey) {
     EXPECT_EQ(e.key(), "world.effects[1].wheel_noise_correlation.rho");
     EXPECT_EQ(e.line(), 12);
   }
+}
+
+}  // namespace
+}  // namespace odomcov
+
+namespace odomcov {
+namespace {
+
+// Review defect 2: the public API validated nothing. Each of these was accepted before (an
+// unknown name gave the plain model; {"bumps", {0.5}} read past the end of its values).
+TEST(EffectApi, InvalidListsThrowEffectError) {
+  const Path path{50.0, {{0, 0, 0}, {2, 1.0, 1.0}}};
+  const Robot robot{0.4, {1e-3, 1e-3}};
+  const auto pieces = model_pieces(path, 0.4);
+  EXPECT_THROW(predict(pieces, robot, {{"wheel_diamter_ratio", {1.01}}}), EffectError);
+  EXPECT_THROW(predict(pieces, robot, {{"bumps", {0.5}}}), EffectError);
+  EXPECT_THROW(Simulator(robot, path, {{"bumps", {0.5}}}), EffectError);
+  EXPECT_THROW(predict(pieces, robot, {{"wheel_noise_correlation", {1.0}}}), EffectError);
+  EXPECT_THROW(predict(pieces, robot, {{"turn_slip", {0.01}}, {"turn_slip", {0.02}}}), EffectError);
+  EffectList many;
+  for (std::size_t i = 0; i <= kMaxEffects; ++i) many.push_back({"scale_error", {1.0}});
+  try {
+    predict(pieces, robot, many);
+    FAIL() << "17 effects accepted";
+  } catch (const EffectError& e) {
+    EXPECT_NE(std::string(e.what()).find("at most 16 effects"), std::string::npos) << e.what();
+  }
+  try {
+    predict(pieces, robot, {{"wheel_diamter_ratio", {1.01}}});
+  } catch (const EffectError& e) {
+    EXPECT_EQ(e.key(), "effects[0].wheel_diamter_ratio");
+    EXPECT_EQ(e.message(), "unknown effect 'wheel_diamter_ratio'");
+  }
+}
+
+// Review defect 3: bumps were capped at 85 per sample without a word. At rate 400/m and 1 Hz
+// (0.5 m per sample, 200 bumps expected) the simulator is refused; at 50 Hz it is exact.
+TEST(EffectApi, BumpsBeyondWhatASampleHoldsAreRefused) {
+  const Robot robot{0.4, {1e-3, 1e-3}};
+  const Path slow{1.0, {{0, 0, 0}, {4, 2.0, 2.0}}};
+  try {
+    Simulator(robot, slow, {{"bumps", {400.0, 1e-4}}});
+    FAIL() << "accepted";
+  } catch (const EffectError& e) {
+    EXPECT_EQ(e.key(), "effects[0].bumps");
+    EXPECT_NE(e.message().find("raise the path's sample_rate"), std::string::npos) << e.what();
+  }
+  const Path fast{50.0, {{0, 0, 0}, {4, 2.0, 2.0}}};  // 4 bumps per sample expected
+  EXPECT_NO_THROW(Simulator(robot, fast, {{"bumps", {400.0, 1e-4}}}));
+}
+
+TEST(Motion, TrackerGivesSpeedCurvatureSpinFractionAndReversals) {
+  effects::MotionTracker t(0.4);
+  const effects::Motion a = t.next(0.009, 0.011, 0.02, 10);  // forward arc, CCW
+  EXPECT_DOUBLE_EQ(a.v_mps, 0.5);
+  EXPECT_DOUBLE_EQ(a.kappa_per_m, 2 * 0.002 / (0.4 * 0.02));
+  EXPECT_DOUBLE_EQ(a.r, 0.1);
+  EXPECT_EQ(a.dir, 1);
+  EXPECT_EQ(a.turn, 1);
+  EXPECT_EQ(a.since_reversal_left_m, HUGE_VAL);  // the play starts taken up forwards
+  const effects::Motion b = t.next(-0.01, 0.01, 0.02);  // spin CCW: the left wheel reverses
+  EXPECT_DOUBLE_EQ(b.t_s, 0.2);
+  EXPECT_DOUBLE_EQ(b.s_m, 0.1);
+  EXPECT_EQ(b.dir, 0);
+  EXPECT_EQ(b.r, 1.0);
+  EXPECT_EQ(b.kappa_per_m, HUGE_VAL);
+  EXPECT_EQ(b.since_reversal_left_m, 0.0);
+  EXPECT_EQ(b.since_reversal_right_m, HUGE_VAL);
+  const effects::Motion c = t.next(-0.01, 0.01, 0.02);
+  EXPECT_DOUBLE_EQ(c.since_reversal_left_m, 0.01);
 }
 
 }  // namespace

@@ -7,7 +7,12 @@
 #include <string>
 #include <vector>
 
+#include "odomcov/error.hpp"
+
 namespace odomcov {
+
+/// At most this many effects in one list: each has its own random-stream slot (random.hpp).
+inline constexpr std::size_t kMaxEffects = 16;
 
 /// One effect with its parameter values, in the catalogue's parameter order.
 struct EffectSpec {
@@ -52,6 +57,21 @@ const EffectInfo* find_effect(const std::string& name);
 
 /// "" when the values are valid for the effect, else what is wrong ("Ed must be > 0").
 std::string check_effect(const EffectSpec& spec);
+
+/// What the library throws for an effect list given through the API that is not valid: an
+/// unknown name, the wrong number of values, a value out of range, an effect listed twice, more
+/// than kMaxEffects effects, or (from the Simulator) a path an effect cannot be simulated on.
+/// An InputError whose key names the list entry ("effects[1].bumps"), so the CLI reports it as
+/// bad input (exit 2).
+class EffectError : public InputError {
+ public:
+  EffectError(const std::string& key, const std::string& what) : InputError("", 0, key, what) {}
+};
+
+/// Throws EffectError unless every spec passes check_effect, no name repeats and the list has
+/// at most kMaxEffects entries. Every entry point that builds effects (Simulator, predict,
+/// resolve) calls it.
+void check_effects(const EffectList& list);
 
 /// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}".
 std::string effect_yaml(const EffectSpec& spec);

@@ -78,6 +78,7 @@ Vector3 path_end_pose(const Path& path, double wheelbase_m);
 struct SampleRun {
   std::int64_t count = 0;
   ArcSegment increment;  // encoder travel of each sample in the run
+  double duration_s = 0.0;  // duration of each sample in the run (1/f, or less at a straddle)
 };
 std::vector<SampleRun> sample_schedule(const Path& path);
 

@@ -69,6 +69,12 @@ struct Prediction {
 ///  * The noise-induced mean uses the heading variance V(u) the propagation itself carries
 ///    (linear within a piece).
 /// With no effects the covariance is exactly the composed closed form.
+///  * Effects see each piece's motion (effects/effect.hpp: speed, curvature, direction,
+///    reversals, time); `durations_s` gives each piece's duration (the overload without it
+///    leaves time and speed unknown, NaN).
+///  * Measurement hooks (reference_offset) map the mean end pose and the covariance last.
+Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                   const Robot& robot, const EffectList& effects);
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effects);
 
@@ -83,6 +89,8 @@ std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces
 /// piecewise-linear V(u) of the noise-induced mean (the covariance does not change).
 inline constexpr double kPieceMaxAngle = 0.25;   // rad
 inline constexpr double kPieceMaxTravel = 0.25;  // m
-std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m);
+/// `durations_s`, when given, receives each piece's duration.
+std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m,
+                                     std::vector<double>* durations_s = nullptr);
 
 }  // namespace odomcov

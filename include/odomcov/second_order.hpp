@@ -50,5 +50,10 @@ std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, do
 /// so the coarsening costs accuracy only in the (small) correction.
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
                               const EffectList& effects, int order);
+/// The same with each piece's duration (logged runs: the log's t column; planned paths:
+/// model_pieces), which motion-dependent effects use.
+Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
+                              const std::vector<double>& durations_s, const Robot& robot,
+                              const EffectList& effects, int order);
 
 }  // namespace odomcov

@@ -15,6 +15,10 @@ namespace {
 /// Draw indices per bump (wheel, size, next gap); 85 bumps fit the 8-bit index of one sample.
 constexpr std::uint32_t kDrawsPerBump = 3;
 constexpr std::uint32_t kMaxBumpsPerSample = 85;
+/// The largest expected number of bumps per sample the simulator accepts: with a Poisson mean
+/// of 30, P(N > 85) < 1e-13 (Chernoff bound exp(-lambda) (e lambda/85)^85 = 3e-14), so the cap
+/// of 85 never binds in practice and the simulation is exact; beyond it the config is refused.
+constexpr double kMaxMeanBumpsPerSample = 30.0;
 
 class Bumps final : public Effect {
  public:
@@ -32,6 +36,15 @@ class Bumps final : public Effect {
       (draws.uniform(s.index, i) < 0.5 ? s.extra_left : s.extra_right) += size;
       to_next += -std::log(1.0 - draws.uniform(s.index, i + 2)) / rate_;
     }
+  }
+  std::string check_samples(double max_mean_travel_m) const override {
+    const double per_sample = rate_ * max_mean_travel_m;
+    if (per_sample <= kMaxMeanBumpsPerSample) return "";
+    return "rate " + std::to_string(rate_) + "/m gives up to " + std::to_string(per_sample) +
+           " bumps per sample on this path; the simulator draws at most " +
+           std::to_string(kMaxBumpsPerSample) + " per sample, exact up to a mean of " +
+           std::to_string(static_cast<int>(kMaxMeanBumpsPerSample)) +
+           ": raise the path's sample_rate";
   }
   void model(PieceModel& piece) const override {
     const double mean_travel =

@@ -52,15 +52,74 @@ std::string effect_yaml(const EffectSpec& spec) {
   return text + "}";
 }
 
-namespace effects {
-
-std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
-  std::vector<std::unique_ptr<Effect>> out;
-  for (const EffectSpec& spec : list) {
-    for (const EffectType& t : registry()) {
-      if (t.info.name == spec.name) out.push_back(t.make(spec.values));
+void check_effects(const EffectList& list) {
+  if (list.size() > kMaxEffects) {
+    throw EffectError("effects", "at most " + std::to_string(kMaxEffects) + " effects, got " +
+                                     std::to_string(list.size()));
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string key = "effects[" + std::to_string(i) + "]." + list[i].name;
+    if (const std::string error = check_effect(list[i]); !error.empty()) throw EffectError(key, error);
+    for (std::size_t j = 0; j < i; ++j) {
+      if (list[j].name == list[i].name) throw EffectError(key, "effect listed twice");
     }
   }
+}
+
+namespace effects {
+
+Motion MotionTracker::next(double dL_m, double dR_m, double dt_s, std::int64_t count) {
+  Motion m;
+  m.dL_m = dL_m;
+  m.dR_m = dR_m;
+  m.dt_s = dt_s;
+  const double travel = std::abs(dL_m) + std::abs(dR_m);
+  m.v_mps = travel / (2.0 * dt_s);
+  const double sum = dL_m + dR_m, diff = dR_m - dL_m;
+  m.dir = (sum > 0) - (sum < 0);
+  m.turn = (diff > 0) - (diff < 0);
+  m.r = travel > 0 ? std::abs(diff) / travel : 0.0;
+  m.kappa_per_m = sum != 0 ? 2.0 * diff / (wheelbase_m_ * sum) : m.turn * HUGE_VAL;
+  // A wheel reverses when it moves against its last direction of motion; standing still keeps it.
+  auto wheel = [](double d, int& dir, double& since) {
+    const int sign = (d > 0) - (d < 0);
+    if (sign != 0 && sign != dir) {
+      dir = sign;
+      since = 0.0;
+    }
+  };
+  wheel(dL_m, dir_left_, since_left_);
+  wheel(dR_m, dir_right_, since_right_);
+  m.since_reversal_left_m = since_left_;
+  m.since_reversal_right_m = since_right_;
+  m.t_s = t_s_;
+  m.s_m = s_m_;
+  const double n = static_cast<double>(count);
+  since_left_ += n * std::abs(dL_m);
+  since_right_ += n * std::abs(dR_m);
+  t_s_ += n * dt_s;
+  s_m_ += n * 0.5 * travel;
+  return m;
+}
+
+void ResolvedPath::measure(Vector3& pose, Matrix3& P_world) const {
+  if (measurement_effects.empty()) return;
+  Matrix3 J = Matrix3::Identity();
+  for (const auto& e : measurement_effects) e->measure_model(pose, J);
+  P_world = J * P_world * J.transpose();
+}
+
+const EffectType& type_of(const std::string& name) {
+  for (const EffectType& t : registry()) {
+    if (t.info.name == name) return t;
+  }
+  throw EffectError("effects", "unknown effect '" + name + "'");
+}
+
+std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
+  check_effects(list);
+  std::vector<std::unique_ptr<Effect>> out;
+  for (const EffectSpec& spec : list) out.push_back(type_of(spec.name).make(spec.values));
   return out;
 }
 

@@ -8,9 +8,9 @@ namespace {
 class ScaleError final : public Effect {
  public:
   explicit ScaleError(double es) : es_(es) {}
-  void systematic(double& scale_left, double& scale_right, double&) const override {
-    scale_left *= es_;
-    scale_right *= es_;
+  void systematic(const Motion&, Systematic& f) const override {
+    f.scale_left *= es_;
+    f.scale_right *= es_;
   }
 
  private:

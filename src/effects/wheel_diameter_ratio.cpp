@@ -10,9 +10,9 @@ namespace {
 class WheelDiameterRatio final : public Effect {
  public:
   explicit WheelDiameterRatio(double ed) : left_(2.0 / (ed + 1.0)), right_(2.0 * ed / (ed + 1.0)) {}
-  void systematic(double& scale_left, double& scale_right, double&) const override {
-    scale_left *= left_;
-    scale_right *= right_;
+  void systematic(const Motion&, Systematic& f) const override {
+    f.scale_left *= left_;
+    f.scale_right *= right_;
   }
 
  private:

@@ -8,9 +8,7 @@ namespace {
 class WheelbaseError final : public Effect {
  public:
   explicit WheelbaseError(double eb) : eb_(eb) {}
-  void systematic(double&, double&, double& wheelbase_factor) const override {
-    wheelbase_factor *= eb_;
-  }
+  void systematic(const Motion&, Systematic& f) const override { f.wheelbase_factor *= eb_; }
 
  private:
   double eb_;
