@@ -40,6 +40,9 @@ class SweepPlan {
   Config point_config(std::size_t i) const;
 
   std::shared_ptr<const YAML::Node> base;  // the parsed base config
+
+ private:
+  Config point_config_unguarded(std::size_t i) const;
 };
 
 /// Reads and validates a sweep file, and every grid point's config, before any work starts.
