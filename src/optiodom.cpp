@@ -6,6 +6,8 @@
 #include <fstream>
 #include <map>
 
+#include <yaml-cpp/yaml.h>
+
 #include "csv.hpp"
 #include "odomcov/error.hpp"
 #include "odomcov/format.hpp"
@@ -123,7 +125,9 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
         right += dr;
         turned += (dr - dl) / wheelbase;
         travel += std::abs(0.5 * (dl + dr));
-        log += format_number(t) + "," + format_number(left) + "," + format_number(right);
+        // %.17g: Unix timestamps (1.7e9 s at 20 Hz) need more than ten digits to stay distinct.
+        log += format_number(t, "%.17g") + "," + format_number(left, "%.17g") + "," +
+               format_number(right, "%.17g");
         if (i + 1 == table.rows.size()) {
           log += "," + format_number(reference.x()) + "," + format_number(reference.y()) + "," + format_number(reference.z());
         } else {
@@ -152,7 +156,11 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
                      "# (Sousa et al., J Intell Robot Syst 105:39, 2022; MIT licence).\n"
                      "# Ticks to metres: pi D / (" + format_number(metas[0].gear) + " x " +
                      format_number(metas[0].resolution) + "), no quadrature factor.\n";
-  yaml += "name: " + options.name + "\n";
+  {
+    YAML::Emitter name;  // quoted as needed, so any name (': ', '', '#') loads back as itself
+    name << YAML::DoubleQuoted << options.name;
+    yaml += std::string("name: ") + name.c_str() + "\n";
+  }
   yaml += robot_yaml(Robot{wheelbase, {options.k, options.k}}) + "\n";
   yaml += "measurement_noise: {xy: " + format_number(options.measurement_noise.xy_m) +
           ", theta_deg: " + format_number(options.measurement_noise.theta_rad / kDegToRad) + "}\n";

@@ -61,7 +61,7 @@ struct SweepMetrics {
   double p_mean = 1.0;
   double p_cov = 1.0;
   double nees_mean = 0.0;
-  std::string verdict;
+  Verdict verdict;
 };
 SweepMetrics sweep_metrics(const Validation& v);
 

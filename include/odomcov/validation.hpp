@@ -24,7 +24,7 @@ struct Validation {
   TestResult mean_test;       // chi^2 with the theory covariance
   TestResult cov_test;        // LRT of Sigma = Sigma_theory
   double nees_mean = 0.0;
-  std::string verdict;
+  Verdict verdict;
   // Beyond the continuous first-order theory (information only, not part of the verdict):
   // the noise-induced mean of propagation.hpp with the chi^2 mean test against it, and the
   // first-order covariance of the sampled odometry ([Wang88], sampled_covariance) with the

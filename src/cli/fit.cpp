@@ -7,6 +7,7 @@
 #include "commands.hpp"
 #include "odomcov/calibration.hpp"
 #include "odomcov/error.hpp"
+#include "odomcov/likelihood.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {
@@ -30,6 +31,14 @@ int run_fit(const FitOptions& opt) {
     }
   }
   const Suite suite = load_suite(opt.suite);
+  // A start whose likelihood is not finite (no wheel noise and no measurement noise: a singular
+  // predicted covariance) gives the optimiser nothing to climb: refuse it plainly.
+  if (!std::isfinite(log_likelihood(residuals(suite, suite_model(suite))))) {
+    throw InputError(suite.file, 0, "robot",
+                     "the suite's model gives a log-likelihood of -inf (a singular predicted "
+                     "covariance: k_left = k_right = 0 and no measurement_noise?); give it some "
+                     "noise to start the fit from");
+  }
   const FitResult r = fit(suite, suite_model(suite), opt.params);
 
   std::ostringstream out;

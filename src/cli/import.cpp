@@ -26,7 +26,6 @@ struct ImportOptions {
 int run_import(const ImportOptions& opt) {
   namespace fs = std::filesystem;
   check_output_dir(opt.out);
-  const fs::path dir(opt.out);
   if (!opt.json.empty()) check_output_path(opt.json);
   if (opt.wheelbase && !(*opt.wheelbase > 0)) throw UsageError("--wheelbase must be > 0");
   if (!opt.diameters.empty() && (opt.diameters.size() != 2 || !(opt.diameters[0] > 0) || !(opt.diameters[1] > 0))) {
@@ -42,11 +41,10 @@ int run_import(const ImportOptions& opt) {
   o.name = opt.name;
   std::vector<ImportSummary> summary;
   const std::vector<ImportedFile> files = import_optiodom(o, &summary);  // all read first
-  for (const ImportedFile& f : files) {
-    const fs::path path = dir / f.path;
-    fs::create_directories(path.parent_path());
-    write_file_atomic(path.string(), f.text);
-  }
+  StagedDir stage(opt.out);
+  const fs::path dir(stage.final_dir());
+  for (const ImportedFile& f : files) stage.write(f.path, f.text);
+  stage.commit();
   std::cout << "odomcov import optiodom: " << opt.sessions.size() << " sessions -> "
             << (dir / "suite.yaml").string() << "\n"
             << "  experiment                              runs  mean travel  mean turn\n";
