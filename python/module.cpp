@@ -216,7 +216,7 @@ py::dict compare_py(const Suite& suite, double alpha) {
     d["nees_mean"] = e.nees_mean;
     d["outside_95"] = e.outside_95;
     d["log_likelihood"] = e.log_likelihood;
-    d["verdict"] = e.verdict;
+    d["verdict"] = e.verdict.name();
     d["errors"] = stack3(e.errors.size(), [&](std::size_t i) { return e.errors[i]; });
     experiments.append(d);
   }
@@ -225,7 +225,7 @@ py::dict compare_py(const Suite& suite, double alpha) {
   out["experiments"] = experiments;
   out["kurtosis"] = test_dict(c.kurtosis);
   out["log_likelihood"] = c.log_likelihood;
-  out["verdict"] = c.verdict;
+  out["verdict"] = c.verdict.name();
   out["failures"] = c.failures;
   return out;
 }
@@ -295,6 +295,16 @@ py::dict diagnose_py(const Suite& suite, double alpha, const std::vector<std::st
   out["candidates"] = candidates;
   out["best"] = dg.best ? candidates[*dg.best] : py::none();
   out["after"] = summary_dict(dg.after);
+  out["explained"] = dg.explained;
+  py::list residuals;
+  for (const ResidualAlignment& r : dg.residuals) {
+    py::dict a;
+    a["feature"] = r.feature;
+    a["p_value"] = r.p_value;
+    a["description"] = r.description;
+    residuals.append(a);
+  }
+  if (!dg.explained) out["residuals"] = residuals;
   return out;
 }
 

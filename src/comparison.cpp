@@ -6,6 +6,7 @@
 #include <boost/math/distributions/normal.hpp>
 #include <boost/math/distributions/students_t.hpp>
 #include <cmath>
+#include <limits>
 
 #include "odomcov/format.hpp"
 
@@ -27,6 +28,7 @@ double student_t_two_sided(double t, double dof) {
 }
 
 double chi2_two_sided(double x, double dof) {
+  if (!std::isfinite(x) || !(dof > 0)) return std::numeric_limits<double>::quiet_NaN();
   const boost::math::chi_squared d(dof);
   const double lower = boost::math::cdf(d, std::max(x, 0.0));
   return std::min(1.0, 2.0 * std::min(lower, 1.0 - lower));
@@ -43,6 +45,22 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
   whitened.clear();
   Matrix3 mean_cov = Matrix3::Zero();
   MomentAccumulator predicted_means;
+  // A prediction that cannot whiten (singular or non-finite covariance, e.g. no wheel noise and
+  // no measurement noise) leaves the experiment untestable, with no statistic computed from it.
+  for (const RunResidual& r : res) {
+    const Eigen::LLT<Matrix3> llt(r.cov);
+    if (llt.info() != Eigen::Success || !r.cov.allFinite() || !r.error.allFinite() ||
+        !r.mean.allFinite()) {
+      for (const RunResidual& q : res) c.errors.push_back(q.error);
+      c.measured = moments(c.errors);
+      c.mean_test.valid = c.cov_test.valid = false;
+      c.cov_method = "none";
+      c.verdict = Verdict::untestable("the predicted covariance is singular or not finite "
+                                      "(no wheel noise and no measurement noise?)");
+      whitened.clear();
+      return c;
+    }
+  }
   for (const RunResidual& r : res) {
     errors.push_back(r.error);
     raw.push_back(r.error - r.mean);
@@ -78,6 +96,7 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
     // Like the joint test: the sample's own standard error (Student t) when the experiment is
     // large enough for Hotelling, else the predicted one (normal).
     const double sd = std::sqrt(std::max(r.cov(k, k), 0.0));
+    if (!(mean_cov(k, k) > 0) && !(c.n > kDim && sd > 0)) continue;
     if (c.n > kDim && sd > 0) {
       c.mean_t(k) = r.mean(k) / (sd / std::sqrt(n));
       c.mean_p(k) = student_t_two_sided(c.mean_t(k), n - 1);
@@ -91,9 +110,7 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
       c.variance_p(k) = chi2_two_sided((n - 1) * c.variance_ratio(k), n - 1);
     }
   }
-  const bool reject = (c.mean_test.valid && c.mean_test.p_value < alpha_test) ||
-                      (c.cov_test.valid && c.cov_test.p_value < alpha_test);
-  c.verdict = reject ? "inconsistent" : "consistent";
+  c.verdict = verdict(c.mean_test, c.cov_test, alpha_test);
   return c;
 }
 
@@ -202,9 +219,7 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
         e.cov_test.statistic /= std::max(1.0, kurtosis_ratio[i]);
         e.cov_test.p_value = chi2_sf(e.cov_test.statistic, e.cov_test.dof);
         e.cov_method = "lrt, kurtosis-scaled";
-        const bool reject = (e.mean_test.valid && e.mean_test.p_value < out.alpha_per_test) ||
-                            e.cov_test.p_value < out.alpha_per_test;
-        e.verdict = reject ? "inconsistent" : "consistent";
+        e.verdict = verdict(e.mean_test, e.cov_test, out.alpha_per_test);
       }
     }
     out.kurtosis.statistic = excess / std::sqrt(variance);
@@ -225,19 +240,19 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
   std::stable_sort(order.begin(), order.end(), [&](auto* a, auto* b) {
     return worst_p(a) != worst_p(b) ? worst_p(a) < worst_p(b) : a->nees_mean > b->nees_mean;
   });
-  bool inconsistent = false;
+  Verdict overall;
   for (const ExperimentComparison* c : order) {
-    inconsistent = inconsistent || c->verdict == "inconsistent";
+    overall.combine(c->verdict);
     for (std::string& w : failure_words(*c, out.alpha_per_test)) out.failures.push_back(std::move(w));
   }
   if (out.kurtosis.valid && out.kurtosis.p_value < out.alpha_per_test && !tails_expected) {
-    inconsistent = true;
+    overall.combine({Verdict::Kind::inconsistent, ""});
     out.failures.push_back(std::string(out.kurtosis.statistic > 0 ? "tails heavier" : "tails lighter") +
                            " than Gaussian: Mardia kurtosis " + format_number(out.mardia_b2, "%.1f") +
                            " against " + format_number(out.mardia_expected, "%.1f") + ", p = " +
                            format_number(out.kurtosis.p_value, "%.2g"));
   }
-  out.verdict = inconsistent ? "inconsistent" : "consistent";
+  out.verdict = overall;
   return out;
 }
 

@@ -5,6 +5,7 @@
 
 #include "odomcov/format.hpp"
 #include "config_yaml.hpp"
+#include "odomcov/limits.hpp"
 #include "yaml_util.hpp"
 
 namespace odomcov {
@@ -25,6 +26,9 @@ std::vector<Keyframe> parse_keyframes(const Where& where, const YAML::Node& node
     }
     Keyframe k{yaml::to_number(row_where, row[0]), yaml::to_number(row_where, row[1]),
                yaml::to_number(row_where, row[2])};
+    for (double travel : {k.left_m, k.right_m}) {
+      if (const std::string e = limits::check_length(travel); !e.empty()) yaml::fail(row_where, row, e);
+    }
     if (i == 0 && (k.t_s != 0.0 || k.left_m != 0.0 || k.right_m != 0.0)) {
       yaml::fail(row_where, row, "the first keyframe must be [0, 0, 0]");
     }
@@ -48,11 +52,18 @@ PathSegment parse_segment(const Where& where, const YAML::Node& node) {
     segment.kind = PathSegment::Kind::line;
     segment.distance_m = yaml::require_number(where, node, "line");
     if (segment.distance_m == 0.0) yaml::fail(where.child("line"), node["line"], "must not be 0");
+    if (const std::string e = limits::check_length(segment.distance_m); !e.empty()) {
+      yaml::fail(where.child("line"), node["line"], e);
+    }
   } else if (node["turn_deg"]) {
     segment.kind = PathSegment::Kind::turn;
     segment.angle_rad = yaml::require_number(where, node, "turn_deg") * kDegToRad;
     if (segment.angle_rad == 0.0) {
       yaml::fail(where.child("turn_deg"), node["turn_deg"], "must not be 0");
+    }
+    if (!(std::abs(segment.angle_rad) <= kMaxTurn_rad)) {
+      yaml::fail(where.child("turn_deg"), node["turn_deg"],
+                 "turn beyond the limit of " + format_number(kMaxTurn_rad / kDegToRad, "%.6g") + " deg");
     }
   } else {
     const Where arc_where = where.child("arc");
@@ -63,6 +74,16 @@ PathSegment parse_segment(const Where& where, const YAML::Node& node) {
     segment.angle_rad = yaml::require_number(arc_where, arc, "angle_deg") * kDegToRad;
     if (segment.angle_rad == 0.0) {
       yaml::fail(arc_where.child("angle_deg"), arc["angle_deg"], "must not be 0");
+    }
+    if (!(std::abs(segment.angle_rad) <= kMaxTurn_rad)) {
+      yaml::fail(arc_where.child("angle_deg"), arc["angle_deg"],
+                 "turn beyond the limit of " + format_number(kMaxTurn_rad / kDegToRad, "%.6g") + " deg");
+    }
+    if (const std::string e = limits::check_length(segment.radius_m); !e.empty()) {
+      yaml::fail(arc_where.child("radius"), arc["radius"], e);
+    }
+    if (const std::string e = limits::check_length(segment.radius_m * segment.angle_rad); !e.empty()) {
+      yaml::fail(arc_where, arc, "arc length: " + e);
     }
   }
   return segment;
@@ -80,7 +101,7 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     if (!item.IsMap() || item.size() != 1) {
       yaml::fail(item_where, item, "expected a single-key map such as {wheel_diameter_ratio: {Ed: 1.004}}");
     }
-    const std::string name = item.begin()->first.as<std::string>();
+    const std::string name = item.begin()->first.Scalar();
     const Where effect_where = item_where.child(name);
     const EffectInfo* info = find_effect(name);
     if (!info) {
@@ -92,7 +113,7 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     if (!params.IsMap()) yaml::fail(effect_where, params, "expected a map of parameters");
     EffectSpec spec{name, {}};
     for (const auto& entry : params) {
-      const std::string p = entry.first.as<std::string>();
+      const std::string p = entry.first.Scalar();
       bool known = false;
       for (const EffectParameterInfo& info_p : info->parameters) known = known || info_p.name == p;
       if (!known) yaml::fail(effect_where.child(p), entry.first, "unknown parameter");
@@ -129,6 +150,9 @@ World parse_world(const YAML::Node& node, const std::string& file, const std::st
                               std::pair{"k_right", &world.noise.k_right}}) {
     if (const auto k = yaml::optional_number(where, node, name)) {
       if (*k < 0.0) yaml::fail(where.child(name), node[name], "must be >= 0");
+      if (const std::string e = limits::check_wheel_noise({*k, *k}); !e.empty()) {
+        yaml::fail(where.child(name), node[name], e);
+      }
       *target = *k;
     }
   }
@@ -143,11 +167,20 @@ Robot parse_robot(const YAML::Node& node, const std::string& file, const std::st
   if (!(robot.wheelbase_m > 0.0)) {
     yaml::fail(where.child("wheelbase"), node["wheelbase"], "must be > 0 m");
   }
+  if (const std::string e = limits::check_wheelbase(robot.wheelbase_m); !e.empty()) {
+    yaml::fail(where.child("wheelbase"), node["wheelbase"], e);
+  }
   robot.noise.k_left = yaml::require_number(where, node, "k_left");
   robot.noise.k_right = yaml::require_number(where, node, "k_right");
   if (robot.noise.k_left < 0.0) yaml::fail(where.child("k_left"), node["k_left"], "must be >= 0");
   if (robot.noise.k_right < 0.0) {
     yaml::fail(where.child("k_right"), node["k_right"], "must be >= 0");
+  }
+  for (const char* k : {"k_left", "k_right"}) {
+    const double value = std::string(k) == "k_left" ? robot.noise.k_left : robot.noise.k_right;
+    if (const std::string e = limits::check_wheel_noise({value, value}); !e.empty()) {
+      yaml::fail(where.child(k), node[k], e);
+    }
   }
   return robot;
 }
@@ -172,6 +205,9 @@ Path parse_path(const YAML::Node& node, const std::string& file, const std::stri
   } else {
     const double speed = yaml::optional_number(where, node, "speed").value_or(kDefaultSpeedMps);
     if (!(speed > 0.0)) yaml::fail(where.child("speed"), node["speed"], "must be > 0 m/s");
+    if (!(speed <= kMaxLength_m)) {
+      yaml::fail(where.child("speed"), node["speed"], "must be at most " + format_number(kMaxLength_m) + " m/s");
+    }
     const Where seg_where = where.child("segments");
     const YAML::Node list = node["segments"];
     yaml::require_sequence(seg_where, list);
@@ -182,14 +218,13 @@ Path parse_path(const YAML::Node& node, const std::string& file, const std::stri
     }
     path.keyframes = keyframes_from_segments(segments, wheelbase_m, speed);
   }
-  const double samples = std::ceil(path.duration_s() * path.sample_rate_hz);
-  if (samples > static_cast<double>(kMaxSamplesPerRun)) {
-    yaml::fail(where.child("sample_rate"), node["sample_rate"],
-               "path needs " + format_number(samples, "%.0f") + " samples, more than the limit " +
-                   std::to_string(kMaxSamplesPerRun));
+  if (const std::string e = limits::check_path(path, wheelbase_m); !e.empty()) {
+    yaml::fail(where, node, e);
   }
   return path;
 }
+
+Config parse_config_unguarded(const YAML::Node& root, const std::string& file);
 
 void check_simulation_size(const std::string& file, int line, const std::string& key,
                            std::int64_t runs, std::int64_t samples_per_run) {
@@ -207,6 +242,10 @@ void check_simulation_size(const std::string& file, int line, const std::string&
 }
 
 Config parse_config(const YAML::Node& root, const std::string& file) {
+  return yaml::guarded(file, [&] { return parse_config_unguarded(root, file); });
+}
+
+Config parse_config_unguarded(const YAML::Node& root, const std::string& file) {
   const Where where{file, ""};
   yaml::require_map(where, root, {"name", "robot", "path", "world", "model", "simulation"});
   Config config;

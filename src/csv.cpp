@@ -1,9 +1,12 @@
 #include "csv.hpp"
 
+#include <cerrno>
 #include <cmath>
-#include <fstream>
+#include <cstdlib>
 
+#include "input_file.hpp"
 #include "odomcov/error.hpp"
+#include "odomcov/limits.hpp"
 
 namespace odomcov::csv {
 namespace {
@@ -27,6 +30,22 @@ std::vector<std::string> split(const std::string& line) {
   return cells;
 }
 
+/// The file's lines: a UTF-8 byte-order mark is dropped, and CRLF ends lines like LF (the
+/// cells are trimmed of '\r' as well).
+std::vector<std::string> lines_of(const std::string& file) {
+  std::string text = read_input_file(file, kMaxCsvBytes, "CSV file");
+  if (text.rfind("\xEF\xBB\xBF", 0) == 0) text.erase(0, 3);
+  std::vector<std::string> lines;
+  std::size_t start = 0;
+  while (start < text.size()) {
+    std::size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    lines.push_back(text.substr(start, end - start));
+    start = end + 1;
+  }
+  return lines;
+}
+
 std::string joined(const std::vector<std::string>& columns) {
   std::string text;
   for (const auto& c : columns) text += (text.empty() ? "" : ",") + c;
@@ -43,33 +62,36 @@ double Row::number(std::size_t i) const {
   const std::string column = i < meta->columns.size() ? meta->columns[i] : std::to_string(i + 1);
   const std::string& cell = cells.at(i);
   if (cell.empty()) fail(meta->file, line, column, "empty cell");
-  std::size_t used = 0;
-  double value = 0.0;
-  try {
-    value = std::stod(cell, &used);
-  } catch (const std::exception&) {
-    used = 0;
+  // Decimal numbers only: strtod also reads "nan", "inf", "infinity" and hex floats, which
+  // are refused here, and a value that overflows a double ("1e400") is not finite.
+  if (cell.find_first_not_of("0123456789+-.eE") != std::string::npos) {
+    const bool non_finite = cell.find_first_of("nNiI") != std::string::npos &&
+                            cell.find_first_not_of("+-nNaAiIfFtTyY") == std::string::npos;
+    fail(meta->file, line, column,
+         non_finite ? "must be finite, got " + quote(cell) : "not a number: " + quote(cell));
   }
-  if (used != cell.size()) fail(meta->file, line, column, "not a number: '" + cell + "'");
-  if (!std::isfinite(value)) fail(meta->file, line, column, "must be finite, got " + cell);
+  errno = 0;
+  char* end = nullptr;
+  const double value = std::strtod(cell.c_str(), &end);
+  if (end != cell.c_str() + cell.size()) fail(meta->file, line, column, "not a number: " + quote(cell));
+  if (!std::isfinite(value) || (errno == ERANGE && std::abs(value) > 1.0)) {
+    fail(meta->file, line, column, "must be finite, got " + quote(cell));
+  }
   return value;
 }
 
 Table read(const std::string& file, const std::vector<std::string>& columns) {
-  std::ifstream in(file);
-  if (!in) throw InputError(file, 0, "", "cannot open file");
   auto meta = std::make_shared<Meta>(Meta{file, columns});
   Table table{meta, {}};
-  std::string line;
   int number = 0;
   bool header = false;
-  while (std::getline(in, line)) {
+  for (const std::string& line : lines_of(file)) {
     ++number;
     if (trim(line).empty()) continue;
     std::vector<std::string> cells = split(line);
     if (!header) {
       if (cells != columns) {
-        fail(file, number, "", "expected the header '" + joined(columns) + "', got '" + trim(line) + "'");
+        fail(file, number, "", "expected the header '" + joined(columns) + "', got " + quote(trim(line)));
       }
       header = true;
       continue;
@@ -86,13 +108,10 @@ Table read(const std::string& file, const std::vector<std::string>& columns) {
 }
 
 Table read_headerless(const std::string& file, std::size_t min_cells) {
-  std::ifstream in(file);
-  if (!in) throw InputError(file, 0, "", "cannot open file");
   auto meta = std::make_shared<Meta>(Meta{file, {}});
   Table table{meta, {}};
-  std::string line;
   int number = 0;
-  while (std::getline(in, line)) {
+  for (const std::string& line : lines_of(file)) {
     ++number;
     if (trim(line).empty()) continue;
     std::vector<std::string> cells = split(line);

@@ -21,7 +21,7 @@ std::size_t run_count(const Suite& suite) {
 ModelSummary summarise(const Comparison& c) {
   ModelSummary s;
   s.log_likelihood = c.log_likelihood;
-  s.verdict = c.verdict;
+  s.verdict = c.verdict.name();
   double runs = 0;
   for (const ExperimentComparison& e : c.experiments) {
     s.nees_mean += e.nees_mean * static_cast<double>(e.n);

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <map>
 
+#include <yaml-cpp/yaml.h>
+
 #include "csv.hpp"
 #include "odomcov/error.hpp"
 #include "odomcov/format.hpp"
@@ -124,7 +126,9 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
         right += dr;
         turned += (dr - dl) / wheelbase;
         travel += std::abs(0.5 * (dl + dr));
-        log += format_number(t) + "," + format_number(left) + "," + format_number(right);
+        // %.17g: Unix timestamps (1.7e9 s at 20 Hz) need more than ten digits to stay distinct.
+        log += format_number(t, "%.17g") + "," + format_number(left, "%.17g") + "," +
+               format_number(right, "%.17g");
         if (i + 1 == table.rows.size()) {
           log += "," + format_number(reference.x()) + "," + format_number(reference.y()) + "," + format_number(reference.z());
         } else {

@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "odomcov/limits.hpp"
 
 namespace odomcov {
 namespace {
@@ -76,9 +80,20 @@ Vector3 path_end_pose(const Path& path, double wheelbase_m) {
   return pose;
 }
 
+namespace {
+
+/// floor/ceil results as counts, saturated: a path outside the input limits (limits.hpp) must
+/// not turn into undefined behaviour here; callers check the count against kMaxSamplesPerRun.
+std::int64_t to_count(double value) {
+  constexpr double kMax = 9.0e18;  // below INT64_MAX, exactly representable
+  if (!(value > 0.0)) return 0;
+  return value >= kMax ? static_cast<std::int64_t>(kMax) : static_cast<std::int64_t>(value);
+}
+
+}  // namespace
+
 std::int64_t sample_count(const Path& path) {
-  return static_cast<std::int64_t>(
-      std::ceil(path.duration_s() * path.sample_rate_hz - kSampleTolerance));
+  return to_count(std::ceil(path.duration_s() * path.sample_rate_hz - kSampleTolerance));
 }
 
 std::vector<SampleRun> sample_schedule(const Path& path) {
@@ -87,8 +102,11 @@ std::vector<SampleRun> sample_schedule(const Path& path) {
   const double T = path.duration_s();
   const std::int64_t n = sample_count(path);
   // Samples [0, n_full) have the full length 1/f; the last one may be shorter.
-  const auto n_full =
-      std::min(n, static_cast<std::int64_t>(std::floor(T * f + kSampleTolerance)));
+  if (n > kMaxSamplesPerRun) {
+    throw std::length_error("sample_schedule: " + std::to_string(n) +
+                            " samples, above kMaxSamplesPerRun (limits.hpp)");
+  }
+  const auto n_full = std::min(n, to_count(std::floor(T * f + kSampleTolerance)));
   const auto& kf = path.keyframes;
 
   // Encoder travel over [t0, t1], from the piecewise-linear wheel distances.
@@ -113,8 +131,8 @@ std::vector<SampleRun> sample_schedule(const Path& path) {
       ++k;
     }
     // Full samples starting at i that end inside interval k share one increment.
-    const auto end_in_k = std::min(
-        n_full, static_cast<std::int64_t>(std::floor(kf[k + 1].t_s * f + kSampleTolerance)));
+    const auto end_in_k =
+        std::min(n_full, to_count(std::floor(kf[k + 1].t_s * f + kSampleTolerance)));
     if (end_in_k > i) {
       const double span = kf[k + 1].t_s - kf[k].t_s;
       const ArcSegment seg = path.interval(k);

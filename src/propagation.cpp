@@ -5,8 +5,11 @@
 #include <cmath>
 #include <algorithm>
 #include <complex>
+#include <limits>
+#include <stdexcept>
 
 #include "effects/effect.hpp"
+#include "odomcov/limits.hpp"
 #include "quadrature.hpp"
 #include "series.hpp"
 
@@ -74,12 +77,18 @@ Complex damped_minus_undamped(double a, double delta) {
     for (const auto& [x, w] : small) sum += w * std::polar(1.0, a * x) * std::expm1(delta * x);
     return sum;
   }
-  const int panels = 1 + static_cast<int>(std::abs(a));
+  // A turn beyond the input limit (limits.hpp) would need more panels than is sensible: NaN,
+  // which the verdicts report as untestable, rather than a hang or an overflowing count.
+  if (!(std::abs(a) <= kMaxTurn_rad) || !std::isfinite(delta)) {
+    return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  }
+  const auto panels = 1 + static_cast<std::int64_t>(std::abs(a));
+  const double n = static_cast<double>(panels);
   Complex sum = 0.0;
-  for (int p = 0; p < panels; ++p) {
+  for (std::int64_t p = 0; p < panels; ++p) {
     for (const auto& [x, w] : nodes) {
-      const double u = (p + x) / panels;
-      sum += (w / panels) * std::polar(1.0, a * u) * std::expm1(delta * u);
+      const double u = (static_cast<double>(p) + x) / n;
+      sum += (w / n) * std::polar(1.0, a * u) * std::expm1(delta * u);
     }
   }
   return sum;
@@ -122,17 +131,29 @@ Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
 
 std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m,
                                      std::vector<double>* durations_s) {
+  // The input checks (limits::check_path) keep paths far below this; a caller that skipped
+  // them gets an exception here instead of an overflowing count or a huge allocation.
+  const double total = limits::model_piece_count(path, wheelbase_m);
+  if (!(total <= kMaxModelPieces)) {
+    throw std::length_error("model_pieces: the path needs " + std::to_string(total) +
+                            " pieces, above kMaxModelPieces (limits.hpp)");
+  }
   std::vector<ArcSegment> pieces;
-  if (durations_s) durations_s->clear();
+  pieces.reserve(static_cast<std::size_t>(total));
+  if (durations_s) {
+    durations_s->clear();
+    durations_s->reserve(static_cast<std::size_t>(total));
+  }
   for (std::size_t i = 0; i < path.interval_count(); ++i) {
     const ArcSegment seg = path.interval(i);
     const double cuts = std::max({1.0, std::ceil(std::abs(seg.heading_change_rad(wheelbase_m)) / kPieceMaxAngle),
                                   std::ceil(std::abs(seg.center_m()) / kPieceMaxTravel)});
-    const int n = static_cast<int>(cuts);
+    const auto n = static_cast<std::int64_t>(cuts);
+    const double nd = static_cast<double>(n);
     const double span = path.keyframes[i + 1].t_s - path.keyframes[i].t_s;
-    for (int k = 0; k < n; ++k) {
-      pieces.push_back({seg.left_m / n, seg.right_m / n});
-      if (durations_s) durations_s->push_back(span / n);
+    for (std::int64_t k = 0; k < n; ++k) {
+      pieces.push_back({seg.left_m / nd, seg.right_m / nd});
+      if (durations_s) durations_s->push_back(span / nd);
     }
   }
   return pieces;

@@ -351,8 +351,16 @@ struct Simulator::Impl {
                     Vector3* out) const;
 };
 
-// The clones: AVX-512 (x86-64-v4), AVX2 (v3) and baseline SSE2, picked by the loader.
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void
+// The clones: AVX-512 (x86-64-v4), AVX2 (v3) and baseline SSE2, picked by the loader. They need
+// GCC on x86-64 (clang 14 rejects these target strings); any other compiler or architecture
+// builds the same vector-extension code once, for the target's baseline (ODOMCOV_SIMD_CLONES).
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define ODOMCOV_SIMD_CLONES 1
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#else
+#define ODOMCOV_SIMD_CLONES 0
+#endif
+void
 Simulator::Impl::vector_group(const random::Philox::key_type& key, std::uint64_t first,
                               Vector3* out) const {
   VecU run;
@@ -496,10 +504,14 @@ std::vector<Vector3> Simulator::errors(std::uint64_t seed, std::int64_t first, s
 }
 
 const char* Simulator::kernel_isa() {
+#if ODOMCOV_SIMD_CLONES
   __builtin_cpu_init();
   if (__builtin_cpu_supports("x86-64-v4")) return "AVX-512 (x86-64-v4)";
   if (__builtin_cpu_supports("x86-64-v3")) return "AVX2 (x86-64-v3)";
   return "SSE2 (x86-64)";
+#else
+  return "portable (vector extensions, no clones)";
+#endif
 }
 
 }  // namespace odomcov

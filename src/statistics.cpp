@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <ostream>
 
 namespace odomcov {
 namespace {
@@ -192,6 +193,7 @@ Matrix3 std_corr_matrix(const Matrix3& cov) {
 }
 
 double chi2_sf(double x, double dof) {
+  if (std::isnan(x) || !(dof > 0.0) || !std::isfinite(dof)) return std::numeric_limits<double>::quiet_NaN();
   if (!(x > 0.0)) return 1.0;
   if (std::isinf(x)) return 0.0;
   return boost::math::cdf(boost::math::complement(boost::math::chi_squared(dof), x));
@@ -200,7 +202,7 @@ double chi2_sf(double x, double dof) {
 TestResult mean_test_known_covariance(const SampleMoments& s, const Vector3& mu0,
                                       const Matrix3& sigma0) {
   Eigen::LLT<Matrix3> llt;
-  if (s.n < 1 || !cholesky(sigma0, llt)) return invalid(kDim);
+  if (s.n < 1 || !cholesky(sigma0, llt) || !s.mean.allFinite() || !mu0.allFinite()) return invalid(kDim);
   const Vector3 d = s.mean - mu0;
   TestResult r;
   r.dof = kDim;
@@ -217,6 +219,7 @@ TestResult hotelling_test(const SampleMoments& s, const Vector3& mu0) {
   TestResult r;
   r.dof = kDim;
   r.statistic = n * d.dot(llt.solve(d));
+  if (!std::isfinite(r.statistic)) return invalid(kDim);
   const double f = (n - kDim) / (kDim * (n - 1.0)) * r.statistic;
   r.p_value = f > 0.0 ? boost::math::cdf(boost::math::complement(
                             boost::math::fisher_f(kDim, n - kDim), f))
@@ -227,7 +230,7 @@ TestResult hotelling_test(const SampleMoments& s, const Vector3& mu0) {
 TestResult covariance_test(const SampleMoments& s, const Matrix3& sigma0) {
   constexpr int kDof = kDim * (kDim + 1) / 2;
   Eigen::LLT<Matrix3> llt;
-  if (s.n <= kDim || !cholesky(sigma0, llt)) return invalid(kDof);
+  if (s.n <= kDim || !cholesky(sigma0, llt) || !s.cov.allFinite()) return invalid(kDof);
   const Matrix3 m = llt.solve(s.cov);  // Sigma0^-1 S: same trace and determinant as S Sigma0^-1
   const double det = m.determinant();
   if (!(det > 0.0)) {
@@ -275,9 +278,38 @@ double nees_mean(const SampleMoments& s, const Vector3& mu, const Matrix3& sigma
   return llt.solve(second).trace();
 }
 
-std::string verdict(const TestResult& mean, const TestResult& cov, double alpha) {
-  const bool reject = (mean.valid && mean.p_value < alpha) || (cov.valid && cov.p_value < alpha);
-  return reject ? "inconsistent" : "consistent";
+const char* Verdict::name() const {
+  switch (kind) {
+    case Kind::consistent: return "consistent";
+    case Kind::inconsistent: return "inconsistent";
+    case Kind::untestable: return "untestable";
+  }
+  return "untestable";
+}
+
+std::string Verdict::text() const {
+  return untestable() && !reason.empty() ? std::string(name()) + " (" + reason + ")" : name();
+}
+
+void Verdict::combine(const Verdict& other) {
+  if (inconsistent() || other.consistent()) return;
+  if (other.inconsistent() || consistent()) *this = other;
+}
+
+std::ostream& operator<<(std::ostream& out, const Verdict& v) { return out << v.text(); }
+
+Verdict verdict(const TestResult& mean, const TestResult& cov, double alpha) {
+  if ((mean.valid && mean.p_value < alpha) || (cov.valid && cov.p_value < alpha)) {
+    return {Verdict::Kind::inconsistent, ""};
+  }
+  if (!mean.valid) {
+    return Verdict::untestable("the mean test cannot be computed: the predicted covariance is "
+                               "singular (no noise in some direction) or not finite");
+  }
+  if (std::isnan(mean.p_value) || (cov.valid && std::isnan(cov.p_value))) {
+    return Verdict::untestable("a test statistic is not a number");
+  }
+  return {};
 }
 
 double gaussian_log_density(const Vector3& x, const Vector3& mu, const Matrix3& sigma) {

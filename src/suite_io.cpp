@@ -9,6 +9,7 @@
 #include "csv.hpp"
 #include "odomcov/config.hpp"
 #include "odomcov/format.hpp"
+#include "odomcov/limits.hpp"
 #include "odomcov/suite.hpp"
 #include "yaml_util.hpp"
 
@@ -17,6 +18,16 @@ namespace {
 
 using yaml::Where;
 
+
+/// A measured pose within the numeric domain (limits.hpp): positions and heading at most
+/// kMaxLength_m (the heading is wrapped, but 1e6 rad is no angle anyone measured).
+void check_pose(const std::string& file, const csv::Row& row, std::size_t first_column) {
+  for (std::size_t c = first_column; c < first_column + 3; ++c) {
+    if (const std::string e = limits::check_length(row.number(c)); !e.empty()) {
+      csv::fail(file, row.line, row.meta->columns[c], e);
+    }
+  }
+}
 
 std::vector<SuiteRun> load_measurements(const std::string& csv_file) {
   const csv::Table table = csv::read(csv_file, {"run", "x", "y", "theta"});
@@ -27,9 +38,10 @@ std::vector<SuiteRun> load_measurements(const std::string& csv_file) {
     run.id = row.text(0);
     if (run.id.empty()) csv::fail(csv_file, row.line, "run", "empty run id");
     if (!ids.insert(run.id).second) {
-      csv::fail(csv_file, row.line, "run", "duplicate run id '" + run.id + "'");
+      csv::fail(csv_file, row.line, "run", "duplicate run id " + quote(run.id));
     }
     run.measured = {row.number(1), row.number(2), row.number(3)};
+    check_pose(csv_file, row, 1);
     runs.push_back(std::move(run));
   }
   return runs;
@@ -45,6 +57,11 @@ SuiteRun load_log(const std::string& log_file) {
   for (std::size_t i = 0; i < table.rows.size(); ++i) {
     const csv::Row& row = table.rows[i];
     const double ti = row.number(0), li = row.number(1), ri = row.number(2);
+    for (std::size_t c : {1, 2}) {
+      if (const std::string e = limits::check_length(row.number(c)); !e.empty()) {
+        csv::fail(log_file, row.line, row.meta->columns[c], e);
+      }
+    }
     if (i > 0) {
       if (!(ti > t)) csv::fail(log_file, row.line, "t", "time must increase strictly");
       run.pieces.push_back({li - left, ri - right});
@@ -57,6 +74,7 @@ SuiteRun load_log(const std::string& log_file) {
         csv::fail(log_file, row.line, "x,y,theta", "a reference pose needs all of x, y and theta");
       }
       run.measured = {row.number(3), row.number(4), row.number(5)};
+      check_pose(log_file, row, 3);
       reference_line = row.line;
       reference_pieces = run.pieces.size();
     }
@@ -78,12 +96,23 @@ MeasurementNoise parse_measurement_noise(const YAML::Node& node, const std::stri
   MeasurementNoise m;
   m.xy_m = yaml::optional_number(where, node, "xy").value_or(0.0);
   m.theta_rad = yaml::optional_number(where, node, "theta_deg").value_or(0.0) * kDegToRad;
-  if (m.xy_m < 0) yaml::fail(where.child("xy"), node["xy"], "must be >= 0");
-  if (m.theta_rad < 0) yaml::fail(where.child("theta_deg"), node["theta_deg"], "must be >= 0");
+  if (!(m.xy_m >= 0 && m.xy_m <= kMaxLength_m)) {
+    yaml::fail(where.child("xy"), node["xy"], "must be in [0, " + format_number(kMaxLength_m) + "] m");
+  }
+  if (!(m.theta_rad >= 0 && m.theta_rad <= kMaxMeasurementNoiseDeg * kDegToRad)) {
+    yaml::fail(where.child("theta_deg"), node["theta_deg"],
+               "must be in [0, " + format_number(kMaxMeasurementNoiseDeg) + "] deg");
+  }
   return m;
 }
 
+Suite load_suite_unguarded(const std::string& file);
+
 Suite load_suite(const std::string& file) {
+  return yaml::guarded(file, [&] { return load_suite_unguarded(file); });
+}
+
+Suite load_suite_unguarded(const std::string& file) {
   const YAML::Node root = yaml::load_file(file);
   const Where where{file, ""};
   yaml::require_map(where, root,
@@ -134,6 +163,9 @@ Suite load_suite(const std::string& file) {
       for (std::size_t j = 0; j < node["logs"].size(); ++j) {
         const std::string log = (dir / yaml::to_string(lw.index(j), node["logs"][j])).string();
         SuiteRun run = load_log(log);
+        if (const std::string e = limits::check_pieces(run.pieces, suite.robot.wheelbase_m); !e.empty()) {
+          throw InputError(log, 0, "", e + " (at the suite's wheelbase)");
+        }
         if (!ids.insert(run.id).second) yaml::fail(lw.index(j), node["logs"][j], "duplicate log");
         ex.runs.push_back(std::move(run));
       }

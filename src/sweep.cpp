@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "odomcov/format.hpp"
+#include "odomcov/limits.hpp"
 #include "random.hpp"
 #include "config_yaml.hpp"
 #include "yaml_util.hpp"
@@ -48,8 +49,11 @@ std::string set_dotted(YAML::Node root, const std::string& key, double value) {
     if (node.IsSequence()) {
       YAML::Node next;
       if (is_index(part)) {
+        // Compared as text first: an index of any length is past the end of a real list.
+        if (part.size() > 9 || std::stoul(part) >= node.size()) {
+          return "index " + quote(part) + " is past the end of the list";
+        }
         const std::size_t index = std::stoul(part);
-        if (index >= node.size()) return "index " + part + " is past the end of the list";
         next = node[index];
       } else {
         for (std::size_t j = 0; j < node.size(); ++j) {
@@ -58,26 +62,26 @@ std::string set_dotted(YAML::Node root, const std::string& key, double value) {
             break;
           }
         }
-        if (!next) return "no list entry named '" + part + "'";
+        if (!next) return "no list entry named " + quote(part);
       }
       if (last) {
-        if (!next.IsScalar()) return "'" + part + "' is not a number";
+        if (!next.IsScalar()) return quote(part) + " is not a number";
         next = value;
         return "";
       }
       node.reset(next);
       continue;
     }
-    if (!node.IsMap()) return "'" + part + "' is not inside a map";
+    if (!node.IsMap()) return quote(part) + " is not inside a map";
     if (last) {
-      if (node[part] && !node[part].IsScalar()) return "'" + part + "' is not a number";
+      if (node[part] && !node[part].IsScalar()) return quote(part) + " is not a number";
       node[part] = value;
       return "";
     }
     if (!node[part]) {
       std::string prefix;
       for (std::size_t j = 0; j <= i; ++j) prefix += (j ? "." : "") + parts[j];
-      return "the base config has no '" + prefix + "'";
+      return "the base config has no " + quote(prefix);
     }
     YAML::Node next = node[part];
     node.reset(next);
@@ -89,7 +93,7 @@ std::string set_dotted(YAML::Node root, const std::string& key, double value) {
 
 std::size_t SweepPlan::point_count() const {
   std::size_t n = 1;
-  for (const SweepAxis& a : axes) n *= a.values.size();
+  for (const SweepAxis& a : axes) n *= a.values.size();  // load_sweep bounds it (no overflow)
   return n;
 }
 
@@ -107,6 +111,10 @@ std::uint64_t SweepPlan::point_seed(std::size_t i) const {
 }
 
 Config SweepPlan::point_config(std::size_t i) const {
+  return yaml::guarded(file, [&] { return point_config_unguarded(i); });
+}
+
+Config SweepPlan::point_config_unguarded(std::size_t i) const {
   const std::vector<double> values = point_values(i);
   YAML::Node root = YAML::Clone(base->root);
   double noise_scale = 1.0, path_scale = 1.0;
@@ -130,7 +138,12 @@ Config SweepPlan::point_config(std::size_t i) const {
       if (!error.empty()) throw InputError(file, axis.line, "grid." + axis.name, error);
     }
   }
-  if (runs > 0 && !runs_on_axis) root["simulation"]["runs"] = runs;
+  if (runs > 0 && !runs_on_axis) {
+    if (root["simulation"] && !root["simulation"].IsMap()) {
+      throw InputError(base_file, yaml::line_of(root["simulation"]), "simulation", "expected a map");
+    }
+    root["simulation"]["runs"] = runs;
+  }
   Config config;
   try {
     config = parse_config(root, base_file);
@@ -144,19 +157,37 @@ Config SweepPlan::point_config(std::size_t i) const {
   }
   config.simulation.seed = point_seed(i);
   // The wheel noise itself scales: the simulated world's and the model's alike.
+  auto axis_line = [&](const char* name) {
+    for (const SweepAxis& a : axes) {
+      if (a.name == name) return a.line;
+    }
+    return 0;
+  };
   for (WheelNoise* noise : {&config.robot.noise, &config.world.noise}) {
     noise->k_left *= noise_scale;
     noise->k_right *= noise_scale;
+    if (const std::string e = limits::check_wheel_noise(*noise); !e.empty()) {
+      throw InputError(file, axis_line("noise_scale"), "grid.noise_scale", describe() + ": " + e);
+    }
   }
   if (path_scale != 1.0) {
     config.path = scale_path(config.path, path_scale);
-    check_simulation_size(file, 0, "grid.path_scale", config.simulation.runs,
+    if (const std::string e = limits::check_path(config.path, config.robot.wheelbase_m); !e.empty()) {
+      throw InputError(file, axis_line("path_scale"), "grid.path_scale", describe() + ": " + e);
+    }
+    check_simulation_size(file, axis_line("path_scale"), "grid.path_scale", config.simulation.runs,
                           sample_count(config.path));
   }
   return config;
 }
 
+SweepPlan load_sweep_unguarded(const std::string& file);
+
 SweepPlan load_sweep(const std::string& file) {
+  return yaml::guarded(file, [&] { return load_sweep_unguarded(file); });
+}
+
+SweepPlan load_sweep_unguarded(const std::string& file) {
   const YAML::Node root = yaml::load_file(file);
   const Where where{file, ""};
   yaml::require_map(where, root, {"base", "runs", "seed", "grid"});
@@ -167,10 +198,11 @@ SweepPlan load_sweep(const std::string& file) {
   if (root["runs"]) plan.runs = yaml::to_integer(where.child("runs"), root["runs"], 1, kMaxRuns);
   if (root["seed"]) plan.seed = yaml::to_unsigned(where.child("seed"), root["seed"]);
   const YAML::Node grid = yaml::require(where, root, "grid");
+  double points = 1.0;
   if (!grid.IsMap() || grid.size() == 0) yaml::fail(where.child("grid"), grid, "expected a map of axes");
   for (const auto& entry : grid) {
     SweepAxis axis;
-    axis.name = entry.first.as<std::string>();
+    axis.name = entry.first.Scalar();
     const Where axis_where = where.child("grid").child(axis.name);
     axis.line = yaml::line_of(entry.first);
     if (axis.name == "simulation.seed") {
@@ -190,6 +222,12 @@ SweepPlan load_sweep(const std::string& file) {
       if (other.name == axis.name) yaml::fail(axis_where, entry.first, "axis given twice");
     }
     plan.axes.push_back(std::move(axis));
+    points *= static_cast<double>(plan.axes.back().values.size());
+    if (points > kMaxSweepPoints) {
+      yaml::fail(axis_where, entry.first,
+                 "the grid has " + format_number(points, "%.6g") + " points up to this axis, more than the limit of " +
+                     format_number(kMaxSweepPoints, "%.6g"));
+    }
   }
   plan.base = std::make_shared<const SweepBase>(SweepBase{yaml::load_file(plan.base_file)});
   for (std::size_t i = 0; i < plan.point_count(); ++i) plan.point_config(i);  // validate all

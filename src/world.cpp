@@ -21,7 +21,13 @@ using yaml::Where;
 
 }  // namespace
 
+WorldFile load_world_unguarded(const std::string& file);
+
 WorldFile load_world(const std::string& file) {
+  return yaml::guarded(file, [&] { return load_world_unguarded(file); });
+}
+
+WorldFile load_world_unguarded(const std::string& file) {
   const YAML::Node root = yaml::load_file(file);
   const Where where{file, ""};
   yaml::require_map(where, root,
@@ -43,6 +49,7 @@ WorldFile load_world(const std::string& file) {
   if (list.size() == 0) yaml::fail(ew, list, "need at least one experiment");
   static const std::regex safe_name("[A-Za-z0-9_.-]+");
   std::set<std::string> names;
+  std::int64_t total_runs = 0;
   for (std::size_t i = 0; i < list.size(); ++i) {
     const Where xw = ew.index(i);
     const YAML::Node node = list[i];
@@ -53,7 +60,13 @@ WorldFile load_world(const std::string& file) {
       yaml::fail(xw.child("name"), node["name"], "use letters, digits, '_', '.' or '-' (it names a file)");
     }
     if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate name");
-    ex.runs = yaml::to_integer(xw.child("runs"), yaml::require(xw, node, "runs"), 2, 1'000'000);
+    ex.runs = yaml::to_integer(xw.child("runs"), yaml::require(xw, node, "runs"), 2, kMaxWorldRuns);
+    total_runs += ex.runs;
+    if (total_runs > kMaxWorldRuns) {
+      yaml::fail(xw.child("runs"), node["runs"],
+                 "the experiments up to this one have " + std::to_string(total_runs) +
+                     " runs in all, more than the limit of " + std::to_string(kMaxWorldRuns));
+    }
     ex.path = parse_path(yaml::require(xw, node, "path"), file, xw.child("path").key,
                          w.robot.wheelbase_m);
     check_simulation_size(file, yaml::line_of(node["runs"]), xw.child("runs").key, ex.runs,

@@ -1,25 +1,76 @@
 #include "yaml_util.hpp"
 
+#include <cerrno>
 #include <cmath>
-#include <fstream>
+#include <cstdlib>
 #include <limits>
-#include <sstream>
+#include <map>
+#include <set>
+#include <utility>
+
+#include "input_file.hpp"
+#include "odomcov/limits.hpp"
 
 namespace odomcov::yaml {
+namespace {
+
+const char* kind_name(const YAML::Node& node) {
+  switch (node.Type()) {
+    case YAML::NodeType::Map: return "a map";
+    case YAML::NodeType::Sequence: return "a list";
+    case YAML::NodeType::Null: return "an empty key";
+    default: return "a value";
+  }
+}
+
+/// The structural checks every loader relies on, done once on the whole tree: every map key is
+/// a plain scalar, and no map has a key twice. Aliased containers are walked once (their mark
+/// identifies them), so an alias bomb costs no more than the text it is written in.
+void check_tree(const Where& where, const YAML::Node& node,
+                std::set<std::pair<int, int>>& visited) {
+  if (!node.IsMap() && !node.IsSequence()) return;
+  const YAML::Mark mark = node.Mark();
+  if (mark.line >= 0 && !visited.insert({mark.line, mark.column}).second) return;
+  if (node.IsSequence()) {
+    std::size_t i = 0;
+    for (const auto& item : node) check_tree(where.index(i++), item, visited);
+    return;
+  }
+  std::map<std::string, int> first_line;
+  for (const auto& entry : node) {
+    if (!entry.first.IsScalar()) {
+      fail(where.child("?"), entry.first,
+           std::string("keys must be plain names, got ") + kind_name(entry.first) + " as a key");
+    }
+    const std::string& name = entry.first.Scalar();
+    const int line = line_of(entry.first);
+    if (const auto [it, fresh] = first_line.emplace(name, line); !fresh) {
+      fail(where.child(name), entry.first,
+           "duplicate key (first at line " + std::to_string(it->second) + ")");
+    }
+    check_tree(where.child(name), entry.second, visited);
+  }
+}
+
+}  // namespace
 
 YAML::Node load_file(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path, 0, "", "cannot open file");
-  std::stringstream text;
-  text << in.rdbuf();
+  const std::string text = read_input_file(path, kMaxYamlBytes, "YAML file");
+  YAML::Node root;
   try {
-    YAML::Node root = YAML::Load(text.str());
-    if (!root.IsDefined() || root.IsNull()) throw InputError(path, 0, "", "file is empty");
-    return root;
-  } catch (const YAML::ParserException& e) {
-    throw InputError(path, e.mark.line >= 0 ? e.mark.line + 1 : 0, "",
-                     "malformed YAML: " + e.msg);
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw InputError(path, e.mark.line >= 0 ? e.mark.line + 1 : 0, "", "malformed YAML: " + e.msg);
   }
+  if (!root.IsDefined() || root.IsNull()) throw InputError(path, 0, "", "file is empty");
+  std::set<std::pair<int, int>> visited;
+  check_tree({path, ""}, root, visited);
+  return root;
+}
+
+void translate_yaml_exception(const std::string& file, const YAML::Exception& e) {
+  throw InputError(file, e.mark.line >= 0 ? e.mark.line + 1 : 0, "",
+                   "unexpected YAML structure: " + e.msg);
 }
 
 int line_of(const YAML::Node& node) {
@@ -36,7 +87,8 @@ void require_map(const Where& where, const YAML::Node& node,
                  std::initializer_list<const char*> allowed) {
   if (!node.IsMap()) fail(where, node, "expected a map");
   for (const auto& entry : node) {
-    const std::string name = entry.first.as<std::string>();
+    if (!entry.first.IsScalar()) fail(where.child("?"), entry.first, "keys must be plain names");
+    const std::string name = entry.first.Scalar();
     bool known = false;
     std::string list;
     for (const char* a : allowed) {
@@ -65,20 +117,20 @@ double to_number(const Where& where, const YAML::Node& node) {
   try {
     value = node.as<double>();
   } catch (const YAML::Exception&) {
-    fail(where, node, "expected a number, got '" + node.Scalar() + "'");
+    fail(where, node, "expected a number, got " + quote(node.Scalar()));
   }
-  if (!std::isfinite(value)) fail(where, node, "must be finite, got " + node.Scalar());
+  if (!std::isfinite(value)) fail(where, node, "must be finite, got " + quote(node.Scalar()));
   return value;
 }
 
 std::int64_t to_integer(const Where& where, const YAML::Node& node, std::int64_t min,
                         std::int64_t max) {
   const double value = to_number(where, node);
-  if (value != std::floor(value)) fail(where, node, "expected a whole number, got " + node.Scalar());
+  if (value != std::floor(value)) fail(where, node, "expected a whole number, got " + quote(node.Scalar()));
   if (value < static_cast<double>(min) || value > static_cast<double>(max)) {
     fail(where, node,
          "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " +
-             node.Scalar());
+             quote(node.Scalar()));
   }
   return static_cast<std::int64_t>(value);
 }
@@ -87,15 +139,14 @@ std::uint64_t to_unsigned(const Where& where, const YAML::Node& node) {
   if (!node.IsScalar()) fail(where, node, "expected a non-negative integer");
   const std::string& text = node.Scalar();
   if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos) {
-    fail(where, node, "expected a non-negative integer, got '" + text + "'");
+    fail(where, node, "expected a non-negative integer, got " + quote(text));
   }
-  try {
-    std::size_t used = 0;
-    const unsigned long long value = std::stoull(text, &used, 10);
-    return static_cast<std::uint64_t>(value);
-  } catch (const std::exception&) {
-    fail(where, node, "integer out of range: " + text);
+  errno = 0;
+  const unsigned long long value = std::strtoull(text.c_str(), nullptr, 10);
+  if (errno == ERANGE || value > std::numeric_limits<std::uint64_t>::max()) {
+    fail(where, node, "integer out of range (at most 2^64 - 1): " + quote(text));
   }
+  return static_cast<std::uint64_t>(value);
 }
 
 std::string to_string(const Where& where, const YAML::Node& node) {

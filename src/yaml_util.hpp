@@ -21,8 +21,24 @@ struct Where {
   Where index(std::size_t i) const { return {file, key + "[" + std::to_string(i) + "]"}; }
 };
 
-/// Parses a YAML file; a missing file or malformed YAML is an InputError.
+/// Parses a YAML file. A missing, non-regular or over-large file (input_file.hpp), malformed
+/// YAML, a key that is not a plain scalar (`? [1]: 2`, `? :`) and a key given twice in one map
+/// are InputErrors naming the file, the line and the dotted key.
 YAML::Node load_file(const std::string& path);
+
+/// Turns a yaml-cpp exception into an InputError with the file and the node's line.
+[[noreturn]] void translate_yaml_exception(const std::string& file, const YAML::Exception& e);
+
+/// Runs `body` (a loader's work on YAML nodes) so that no yaml-cpp exception escapes it: the
+/// checks above come first, and anything yaml-cpp still throws becomes an InputError.
+template <class Body>
+auto guarded(const std::string& file, Body&& body) -> decltype(body()) {
+  try {
+    return body();
+  } catch (const YAML::Exception& e) {
+    translate_yaml_exception(file, e);
+  }
+}
 
 /// 1-based line of a node, 0 if unknown.
 int line_of(const YAML::Node& node);

@@ -24,7 +24,7 @@ struct ExperimentComparison {
   double nees_mean = 0.0;
   double outside_95 = 0.0;  // fraction of runs with NEES above the chi^2_3 95% point
   double log_likelihood = 0.0;
-  std::string verdict;
+  Verdict verdict;
   std::vector<Vector3> errors;  // each run's error (measured - odometry), in order
   // Per component (x, y, theta), for the plain-words failures:
   Vector3 mean_t = Vector3::Zero();        // (measured - predicted mean)/standard error
@@ -42,7 +42,7 @@ struct Comparison {
   double mardia_expected = 0.0;  // its expectation for Gaussian errors (15 (n-1)/(n+1))
   double kurtosis_scale = 1.0;   // pooled b2/E b2 when the covariance LRTs were kurtosis-scaled
   double log_likelihood = 0.0;
-  std::string verdict;
+  Verdict verdict;
   std::vector<std::string> failures;  // plain words, worst experiment first
 };
 

@@ -5,15 +5,10 @@
 #include <string>
 
 #include "odomcov/effects.hpp"
+#include "odomcov/limits.hpp"
 #include "odomcov/path.hpp"
 
 namespace odomcov {
-
-/// Bounds that reject absurd requests before any work starts.
-inline constexpr std::int64_t kMaxRuns = 1'000'000'000;
-inline constexpr std::int64_t kMaxSamplesPerRun = 100'000'000;
-/// runs x samples per run; 1e12 steps is about an hour and a half on two cores.
-inline constexpr double kMaxSimulationSteps = 1e12;
 
 struct SimulationSettings {
   std::int64_t runs = 10'000;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <iosfwd>
 #include <string>
 #include <vector>
 
@@ -101,8 +102,31 @@ TestResult covariance_test_adf(const SampleMoments& s, const Matrix3& sigma0);
 /// tr(Sigma^-1 ((n-1)/n S + (m - mu)(m - mu)')). Expected value 3 when the model is right.
 double nees_mean(const SampleMoments& s, const Vector3& mu, const Matrix3& sigma);
 
-/// "consistent" unless a valid test rejects at alpha.
-std::string verdict(const TestResult& mean, const TestResult& cov, double alpha);
+/// The outcome of a consistency check. Spelled "consistent", "inconsistent" or "untestable" in
+/// JSON, CSV and text. Untestable: a statistic could not be computed (a singular or zero
+/// predicted covariance, NaN anywhere); it is never read as consistent, and `--check` fails.
+struct Verdict {
+  enum class Kind { consistent, inconsistent, untestable };
+  Kind kind = Kind::consistent;
+  std::string reason;  // why, when untestable
+
+  static Verdict untestable(std::string why) { return {Kind::untestable, std::move(why)}; }
+  bool consistent() const { return kind == Kind::consistent; }
+  bool inconsistent() const { return kind == Kind::inconsistent; }
+  bool untestable() const { return kind == Kind::untestable; }
+  const char* name() const;
+  /// For reports: the name, and the reason when untestable.
+  std::string text() const;
+  /// Several checks together: inconsistent if any is, else untestable if any is.
+  void combine(const Verdict& other);
+  bool operator==(const char* spelling) const { return std::string(name()) == spelling; }
+  bool operator==(const std::string& spelling) const { return name() == spelling; }
+};
+std::ostream& operator<<(std::ostream& out, const Verdict& v);
+
+/// Inconsistent when a valid test rejects at alpha; untestable when the mean test cannot be
+/// computed (singular reference covariance) or a p-value is NaN; else consistent.
+Verdict verdict(const TestResult& mean, const TestResult& cov, double alpha);
 
 /// Gaussian log-density of x under N(mu, sigma).
 double gaussian_log_density(const Vector3& x, const Vector3& mu, const Matrix3& sigma);

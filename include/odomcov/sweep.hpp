@@ -39,6 +39,9 @@ class SweepPlan {
   Config point_config(std::size_t i) const;
 
   std::shared_ptr<const SweepBase> base;  // the parsed base config
+
+ private:
+  Config point_config_unguarded(std::size_t i) const;
 };
 
 /// Reads and validates a sweep file, and every grid point's config, before any work starts.
@@ -57,7 +60,7 @@ struct SweepMetrics {
   double p_mean = 1.0;
   double p_cov = 1.0;
   double nees_mean = 0.0;
-  std::string verdict;
+  Verdict verdict;
 };
 SweepMetrics sweep_metrics(const Validation& v);
 

@@ -26,7 +26,7 @@ struct OrderResult {
   TestResult cov_test;
   TestResult cov_lrt;  // order 2: the Gaussian LRT against the order-2 covariance (information)
   double nees_mean = 0.0;
-  std::string verdict;
+  Verdict verdict;
 };
 
 struct Validation {
@@ -40,7 +40,7 @@ struct Validation {
   TestResult mean_test;       // chi^2 with the theory covariance
   TestResult cov_test;        // LRT of Sigma = Sigma_theory
   double nees_mean = 0.0;
-  std::string verdict;
+  Verdict verdict;
   // The order the fields above follow (--order), and the other order's results beside it.
   int order = 1;
   OrderResult other;

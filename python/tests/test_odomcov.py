@@ -81,5 +81,10 @@ def test_suite_commands(tmp_path):
     assert "k_left" in f["parameters"] and f["log_likelihood_after"] >= f["log_likelihood_before"] - 1e-9
     with pytest.raises(ValueError):
         odomcov.fit(suite, ["k_lft"])
+    d = odomcov.diagnose(suite)
+    # The honest verdict: explained exactly when the final model is consistent, and otherwise
+    # what the misfit lines up with.
+    assert d["explained"] == (d["after"]["verdict"] == "consistent")
+    assert d["explained"] or "residuals" in d
     with pytest.raises(ValueError):
         odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "nan.yaml"))

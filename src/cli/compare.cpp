@@ -79,7 +79,7 @@ json comparison_json(const Suite& suite, const Comparison& c) {
                            {"nees_mean", e.nees_mean},
                            {"outside_95", e.outside_95},
                            {"log_likelihood", e.log_likelihood},
-                           {"verdict", e.verdict},
+                           {"verdict", e.verdict.name()},
                            {"errors", errors}});
   }
   json kurtosis = test_json(c.kurtosis);
@@ -92,7 +92,7 @@ json comparison_json(const Suite& suite, const Comparison& c) {
           {"experiments", experiments},
           {"kurtosis", kurtosis},
           {"log_likelihood", c.log_likelihood},
-          {"verdict", c.verdict},
+          {"verdict", c.verdict.name()},
           {"failures", c.failures}};
 }
 

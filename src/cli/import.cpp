@@ -33,19 +33,12 @@ void write_import(const std::string& kind, const std::string& what, const std::s
                   const std::string& json_file, const std::vector<ImportedFile>& files,
                   const std::vector<ImportSummary>& summary) {
   namespace fs = std::filesystem;
-  const fs::path dir(out);
-  const ImportedFile* suite = nullptr;
-  for (const ImportedFile& f : files) {
-    if (f.path == "suite.yaml") {
-      suite = &f;
-      continue;
-    }
-    const fs::path path = dir / f.path;
-    fs::create_directories(path.parent_path());
-    write_file_atomic(path.string(), f.text);
-  }
-  fs::create_directories(dir);
-  if (suite) write_file_atomic((dir / "suite.yaml").string(), suite->text);
+  // All or nothing: every file goes into a staging directory beside `out`, moved into place
+  // only when all are written.
+  StagedDir stage(out);
+  for (const ImportedFile& f : files) stage.write(f.path, f.text);
+  stage.commit();
+  const fs::path dir(stage.final_dir());
   const bool with_reference = !summary.empty() && summary.front().mean_reference_travel_m >= 0;
   std::cout << "odomcov import " << kind << ": " << what << " -> " << (dir / "suite.yaml").string() << "\n"
             << "  experiment                              runs  mean travel  mean turn"
@@ -74,7 +67,6 @@ void write_import(const std::string& kind, const std::string& what, const std::s
 int run_import(const ImportOptions& opt) {
   namespace fs = std::filesystem;
   check_output_dir(opt.out);
-  const fs::path dir(opt.out);
   if (!opt.json.empty()) check_output_path(opt.json);
   if (opt.wheelbase && !(*opt.wheelbase > 0)) throw UsageError("--wheelbase must be > 0");
   if (!opt.diameters.empty() && (opt.diameters.size() != 2 || !(opt.diameters[0] > 0) || !(opt.diameters[1] > 0))) {

@@ -32,16 +32,16 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    std::cerr << "odomcov: " << e.what() << " (see odomcov --help)\n";
+    std::cerr << "odomcov: " << odomcov::one_line(e.what()) << " (see odomcov --help)\n";
     return kExitBadInput;
   } catch (const odomcov::InputError& e) {
     std::cerr << "odomcov: " << e.what() << "\n";
     return kExitBadInput;
   } catch (const UsageError& e) {
-    std::cerr << "odomcov: " << e.what() << "\n";
+    std::cerr << "odomcov: " << odomcov::one_line(e.what()) << "\n";
     return kExitBadInput;
   } catch (const std::exception& e) {
-    std::cerr << "odomcov: internal error: " << e.what() << "\n";
+    std::cerr << "odomcov: internal error: " << odomcov::one_line(e.what()) << "\n";
     return 3;
   }
   return exit_code;

@@ -7,6 +7,9 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <vector>
+
+#include "odomcov/error.hpp"
 
 namespace odomcov::cli {
 
@@ -86,10 +89,11 @@ void check_output_path(const std::string& path) {
   if (fs::is_directory(path)) throw UsageError(path + ": is a directory");
 }
 
-void check_output_dir(const std::string& dir) {
+void check_output_dir(const std::string& out) {
   namespace fs = std::filesystem;
-  fs::path path(dir);
-  if (!path.has_filename() && path.has_parent_path()) path = path.parent_path();  // "lab/" -> "lab"
+  std::string dir = out;
+  while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
+  const fs::path path(dir);
   const fs::path parent = path.has_parent_path() ? path.parent_path() : fs::path(".");
   if (!fs::is_directory(parent)) throw UsageError("--out: directory " + parent.string() + " does not exist");
   if (fs::exists(path) && !fs::is_directory(path)) throw UsageError("--out: " + dir + " is not a directory");
@@ -104,7 +108,19 @@ void check_order(int order) {
 }
 
 void check_threads(int threads) {
-  if (threads < 0) throw UsageError("--threads must be >= 0 (0 = all cores)");
+  if (threads < 0 || threads > kMaxThreads) {
+    throw UsageError("--threads must be in [0, " + std::to_string(kMaxThreads) + "] (0 = all cores)");
+  }
+}
+
+std::string non_negative_integer(const std::string& text) {
+  if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos) {
+    return "expected a non-negative integer, got " + quote(text);
+  }
+  if (text.size() > 20 || (text.size() == 20 && text > "18446744073709551615")) {
+    return "integer out of range (at most 2^64 - 1): " + quote(text);
+  }
+  return "";
 }
 
 void write_file_atomic(const std::string& path, const std::string& text) {
@@ -130,6 +146,71 @@ void write_file_atomic(const std::string& path, const std::string& text) {
 
 void write_json_atomic(const std::string& path, const json& value) {
   write_file_atomic(path, value.dump(2) + "\n");
+}
+
+}  // namespace odomcov::cli
+
+namespace odomcov::cli {
+
+namespace {
+std::string strip_trailing_slashes(std::string dir) {
+  while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
+  return dir;
+}
+}  // namespace
+
+StagedDir::StagedDir(const std::string& out) : out_(strip_trailing_slashes(out)) {
+  namespace fs = std::filesystem;
+  check_output_dir(out_);
+  tmp_ = out_ + ".tmp." + std::to_string(::getpid());
+  std::error_code ec;
+  fs::remove_all(tmp_, ec);
+  if (!fs::create_directory(tmp_, ec) || ec) {
+    throw UsageError("--out: cannot create a directory next to " + one_line(out_, 200) + " (" +
+                     ec.message() + ")");
+  }
+}
+
+StagedDir::~StagedDir() {
+  std::error_code ec;
+  if (!tmp_.empty()) std::filesystem::remove_all(tmp_, ec);
+}
+
+void StagedDir::write(const std::string& relative, const std::string& text) {
+  namespace fs = std::filesystem;
+  const fs::path path = fs::path(tmp_) / relative;
+  std::error_code ec;
+  fs::create_directories(path.parent_path(), ec);
+  std::ofstream file(path, std::ios::binary | std::ios::trunc);
+  file << text;
+  file.flush();
+  if (ec || !file) throw UsageError("--out: cannot write " + one_line(path.string(), 200));
+}
+
+void StagedDir::commit() {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(out_)) {
+    fs::rename(tmp_, out_, ec);
+    if (ec) throw UsageError("--out: cannot create " + one_line(out_, 200) + " (" + ec.message() + ")");
+  } else {
+    // Into an existing directory: every destination is checked first, then each file is
+    // renamed into place (renames within one file system do not fail part-way for space).
+    std::vector<fs::path> files;
+    for (const auto& entry : fs::recursive_directory_iterator(tmp_)) {
+      if (!entry.is_regular_file()) continue;
+      const fs::path target = fs::path(out_) / fs::relative(entry.path(), tmp_);
+      if (fs::is_directory(target)) throw UsageError("--out: " + one_line(target.string(), 200) + " is a directory");
+      files.push_back(entry.path());
+    }
+    for (const fs::path& f : files) {
+      const fs::path target = fs::path(out_) / fs::relative(f, tmp_);
+      fs::create_directories(target.parent_path(), ec);
+      fs::rename(f, target, ec);
+      if (ec) throw UsageError("--out: cannot write " + one_line(target.string(), 200) + " (" + ec.message() + ")");
+    }
+  }
+  committed_ = true;
 }
 
 }  // namespace odomcov::cli

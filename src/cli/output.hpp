@@ -43,15 +43,41 @@ void check_output_path(const std::string& path);
 /// and it must be a directory if it exists.
 void check_output_dir(const std::string& dir);
 
-/// Usage checks shared by the subcommands: --alpha in (0, 1), --threads >= 0.
+/// Usage checks shared by the subcommands: --alpha in (0, 1), --threads in [0, kMaxThreads]
+/// (TBB caps its workers at the machine's cores anyway; more is a typo, not a request).
+inline constexpr int kMaxThreads = 1024;
 void check_alpha(double alpha);
 /// --order must be 1 (first order) or 2 (the order-2 model).
 void check_order(int order);
 void check_threads(int threads);
 
+/// CLI11 check for unsigned options (seeds): digits only, so "-1" is refused instead of
+/// wrapping to 2^64 - 1, and the value must fit 64 bits.
+std::string non_negative_integer(const std::string& text);
+
 /// Writes `text` to `path` via a temporary file and rename.
 void write_file_atomic(const std::string& path, const std::string& text);
 void write_json_atomic(const std::string& path, const json& value);
+
+/// An output directory written all or nothing (synth, import): files go into a temporary
+/// sibling directory, created at once (so an unwritable destination fails before any work), and
+/// commit() moves them into place; without commit() nothing is left behind. A trailing '/' is
+/// allowed and the directory need not exist (its parent must).
+class StagedDir {
+ public:
+  explicit StagedDir(const std::string& out);
+  ~StagedDir();
+  StagedDir(const StagedDir&) = delete;
+  StagedDir& operator=(const StagedDir&) = delete;
+  /// Writes `relative` (may contain sub-directories) into the staging directory.
+  void write(const std::string& relative, const std::string& text);
+  void commit();
+  const std::string& final_dir() const { return out_; }
+
+ private:
+  std::string out_, tmp_;
+  bool committed_ = false;
+};
 
 /// A usage error: reported as one line, exit code 2.
 struct UsageError : std::runtime_error {

@@ -131,7 +131,8 @@ int run_run(const RunOptions& opt) {
     }
     write_json_atomic(opt.json, doc);
   }
-  return opt.check && v.verdict == "inconsistent" ? kExitInconsistent : kExitOk;
+  // --check passes only on consistent: an untestable verdict is a failure too.
+  return opt.check && !v.verdict.consistent() ? kExitInconsistent : kExitOk;
 }
 
 }  // namespace
@@ -143,11 +144,11 @@ json order_json(const OrderResult& o) {
           {"source", o.theory_source},
           {"tests", tests},
           {"nees_mean", o.nees_mean},
-          {"verdict", o.verdict}};
+          {"verdict", o.verdict.name()}};
 }
 
 json validation_json(const std::string& name, const Validation& v) {
-  return {{"name", name},
+  json out = {{"name", name},
           {"order", v.order},
           {"order_" + std::to_string(v.other.order), order_json(v.other)},
           {"runs", v.runs},
@@ -162,7 +163,9 @@ json validation_json(const std::string& name, const Validation& v) {
           {"sampled_theory",
            {{"cov", to_json(v.sampled_cov)}, {"test", test_json(v.sampled_cov_test)}}},
           {"nees_mean", v.nees_mean},
-          {"verdict", v.verdict}};
+          {"verdict", v.verdict.name()}};
+  if (v.verdict.untestable()) out["verdict_reason"] = v.verdict.reason;
+  return out;
 }
 
 void setup_run(CLI::App& app, int& exit_code) {
@@ -170,7 +173,8 @@ void setup_run(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand("run", "Monte-Carlo simulation against the closed form");
   cmd->add_option("config", opt->config, "Path config (YAML)")->required();
   cmd->add_option("--runs", opt->runs, "Number of Monte-Carlo runs (overrides the config)");
-  cmd->add_option("--seed", opt->seed, "Random seed (overrides the config)");
+  cmd->add_option("--seed", opt->seed, "Random seed (overrides the config)")
+      ->check(non_negative_integer);
   cmd->add_option("--threads", opt->threads, "Worker threads; 0 = all cores")
       ->capture_default_str();
   cmd->add_option("--alpha", opt->alpha, "Significance level of the tests")
@@ -179,7 +183,7 @@ void setup_run(CLI::App& app, int& exit_code) {
                   "Model order of the theory and verdict: 1 = first-order closed form, 2 = exact "
                   "Gaussian-heading moments with the ADF covariance test (docs/orders.md)")
       ->capture_default_str();
-  cmd->add_flag("--check", opt->check, "Exit with code 1 when the verdict is inconsistent");
+  cmd->add_flag("--check", opt->check, "Exit with code 1 unless the verdict is consistent (inconsistent or untestable)");
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
   cmd->add_option("--samples", opt->samples,
                   "Also put the end-pose errors of the first N runs in the JSON (scatter plots)");

@@ -7,6 +7,7 @@
 #include <regex>
 
 #include "commands.hpp"
+#include "odomcov/error.hpp"
 #include "odomcov/format.hpp"
 #include "odomcov/sweep.hpp"
 #include "output.hpp"
@@ -37,7 +38,9 @@ extern "C" void on_interrupt(int) {
 std::pair<std::size_t, std::size_t> parse_shard(const std::string& text) {
   static const std::regex pattern(R"((\d+)/(\d+))");
   std::smatch m;
-  if (!std::regex_match(text, m, pattern)) throw UsageError("--shard must be I/N, got " + text);
+  if (!std::regex_match(text, m, pattern)) throw UsageError("--shard must be I/N, got " + one_line(text, 100));
+  // At most 9 digits each: a longer count cannot be a real shard (and would overflow stoul).
+  if (m[1].length() > 9 || m[2].length() > 9) throw UsageError("--shard I/N: I and N must be below 1e9, got " + one_line(text, 100));
   const std::size_t i = std::stoul(m[1]), n = std::stoul(m[2]);
   if (n < 1 || i < 1 || i > n) throw UsageError("--shard I/N needs 1 <= I <= N, got " + text);
   return {i, n};
@@ -52,7 +55,7 @@ std::string csv_row(const SweepPlan& plan, std::size_t point, const Validation& 
                    m.bias_se.x(), m.bias_se.y(), m.bias_se.z(), m.p_mean, m.p_cov, m.nees_mean}) {
     row += "," + format_number(x);
   }
-  return row + "," + m.verdict + "\n";
+  return row + "," + m.verdict.name() + "\n";
 }
 
 int run_sweep(const SweepOptions& opt) {
@@ -127,10 +130,10 @@ int run_sweep(const SweepOptions& opt) {
   }
   if (!opt.out.empty()) {
     std::size_t inconsistent = 0;
-    for (const json& r : rows) inconsistent += r["verdict"] == "inconsistent";
+    for (const json& r : rows) inconsistent += r["verdict"] != "consistent";
     std::cout << "odomcov sweep: " << plan.file << " (base " << plan.base_file << "), shard "
               << shard << "/" << shards << ": " << points.size() << " of " << plan.point_count()
-              << " points, " << inconsistent << " inconsistent at alpha = " << opt.alpha
+              << " points, " << inconsistent << " inconsistent or untestable at alpha = " << opt.alpha
               << "; rows in " << opt.out << "\n";
   }
   if (!opt.json.empty()) {

@@ -22,25 +22,19 @@ struct SynthOptions {
 int run_synth(const SynthOptions& opt) {
   namespace fs = std::filesystem;
   check_threads(opt.threads);
-  check_output_dir(opt.out);
-  const fs::path dir(opt.out);
   if (!opt.json.empty()) check_output_path(opt.json);
   const WorldFile world = load_world(opt.world);
-
-  // Everything is simulated before anything is written.
-  std::vector<std::vector<Vector3>> measured;
-  for (std::size_t i = 0; i < world.experiments.size(); ++i) {
-    measured.push_back(synthesize(world, i, opt.threads));
-  }
-  fs::create_directories(dir);
+  StagedDir stage(opt.out);  // nothing appears in --out unless every file is written
+  const fs::path dir(stage.final_dir());
   std::ostringstream report;
   report << "odomcov synth: " << world.name << " -> " << (dir / "suite.yaml").string() << "\n"
          << "  experiment                 runs   mean measured end pose (x, y, theta)\n";
   json experiments = json::array();
   for (std::size_t i = 0; i < world.experiments.size(); ++i) {
     const WorldExperiment& ex = world.experiments[i];
-    write_file_atomic((dir / (ex.name + ".csv")).string(), measurements_csv(measured[i]));
-    const SampleMoments m = moments(measured[i]);
+    const std::vector<Vector3> measured = synthesize(world, i, opt.threads);
+    stage.write(ex.name + ".csv", measurements_csv(measured));
+    const SampleMoments m = moments(measured);
     char line[160];
     std::snprintf(line, sizeof line, "  %-26s %4lld   (%.4f, %.4f, %.4f)\n", ex.name.c_str(),
                   static_cast<long long>(ex.runs), m.mean.x(), m.mean.y(), m.mean.z());
@@ -48,7 +42,8 @@ int run_synth(const SynthOptions& opt) {
     experiments.push_back({{"name", ex.name}, {"runs", ex.runs}, {"file", ex.name + ".csv"},
                            {"measured", moments_json(m.mean, m.cov)}});
   }
-  write_file_atomic((dir / "suite.yaml").string(), suite_yaml(world));
+  stage.write("suite.yaml", suite_yaml(world));
+  stage.commit();
   std::cout << report.str();
   if (!opt.json.empty()) {
     write_json_atomic(opt.json, {{"world", world.file},

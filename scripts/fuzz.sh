@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets of tests/fuzz with clang, ASan and UBSan (in build-fuzz/, apart
+# from the normal build) and runs each for SECONDS (default 60), starting from the committed
+# seed corpus tests/fuzz/corpus/<target>/. Prints one line per target: executions, coverage
+# (libFuzzer's edge counter "cov"), features ("ft") and the corpus size, and where any crash
+# input went. Exit status 1 if any target crashed.
+#   scripts/fuzz.sh [SECONDS] [TARGET...]
+set -u
+cd "$(dirname "$0")/.."
+seconds=${1:-60}
+shift || true
+build=${ODOMCOV_FUZZ_BUILD:-build-fuzz}
+cxx=${CXX_FUZZ:-clang++}
+command -v "$cxx" >/dev/null || { echo "fuzz.sh: $cxx not found (apt-get install clang libclang-rt-dev)"; exit 2; }
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER="$cxx" \
+  -DODOMCOV_FUZZ=ON -DODOMCOV_BUILD_TESTS=OFF -DODOMCOV_BUILD_BENCHMARKS=OFF "${launcher[@]}" >/dev/null || exit 2
+targets=("$@")
+if [ ${#targets[@]} -eq 0 ]; then
+  for f in tests/fuzz/fuzz_*.cpp; do
+    t=$(basename "$f" .cpp); t=${t#fuzz_}
+    [ "$t" = util ] || targets+=("$t")
+  done
+fi
+cmake --build "$build" --target $(printf 'fuzz_%s ' "${targets[@]}") >/dev/null || { echo "fuzz.sh: build failed"; exit 2; }
+
+crashed=0
+printf '%-12s %10s %8s %8s %8s  %s\n' target execs cov ft corpus result
+for t in "${targets[@]}"; do
+  work="$build/corpus/$t" artifacts="$build/artifacts/$t/"
+  mkdir -p "$work" "$artifacts"
+  log="$build/fuzz_$t.log"
+  ASAN_OPTIONS=detect_leaks=0 "$build/tests/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 \
+    -rss_limit_mb=2048 -max_len=8192 -print_final_stats=1 -artifact_prefix="$artifacts" \
+    "$work" "tests/fuzz/corpus/$t" >"$log" 2>&1
+  code=$?
+  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+  last=$(grep -E '^#[0-9]+' "$log" | tail -1)
+  cov=$(sed -n 's/.* cov: \([0-9]*\).*/\1/p' <<<"$last")
+  ft=$(sed -n 's/.* ft: \([0-9]*\).*/\1/p' <<<"$last")
+  corp=$(sed -n 's/.* corp: \([0-9]*\)\/.*/\1/p' <<<"$last")
+  if [ $code -eq 0 ]; then result=ok; else
+    crashed=1
+    result="CRASH: $(ls -t "$artifacts" | head -1 | sed "s|^|$artifacts|") (log $log)"
+  fi
+  printf '%-12s %10s %8s %8s %8s  %s\n' "$t" "${execs:-?}" "${cov:-?}" "${ft:-?}" "${corp:-?}" "$result"
+done
+exit $crashed

@@ -1,0 +1,22 @@
+// Fuzz target: a measurement suite with its CSVs and logs (sections "#@ NAME.csv"), then
+// `compare` with the suite's own model (the residuals, whitening and every test).
+#include <cstdint>
+
+#include "fuzz_util.hpp"
+#include "odomcov/comparison.hpp"
+#include "odomcov/error.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  using namespace odomcov;
+  const auto dir = fuzz::unpack(data, size, "suite.yaml");
+  ODOMCOV_FUZZ_INPUT_ERRORS_ARE_FINE({
+    const Suite suite = load_suite((dir / "suite.yaml").string());
+    std::size_t runs = 0;
+    for (const SuiteExperiment& ex : suite.experiments) {
+      runs += ex.runs.size();
+      for (const SuiteRun& r : ex.runs) runs += r.pieces.size();
+    }
+    if (runs <= 50'000) compare(suite, suite_model(suite), 0.01);
+  });
+  return 0;
+}
