@@ -71,29 +71,10 @@ Validation validate(const Config& config, double alpha, int threads, Progress* p
   v.noise_induced_mean_test =
       mean_test_known_covariance(v.simulation, v.theory_mean + noise_mean, v.theory_cov);
   // The other order (or, with --order 2, this one's fields from it).
-  OrderResult first;
-  first.order = 1;
-  first.theory_mean = v.theory_mean;
-  first.theory_cov = v.theory_cov;
-  first.theory_source = v.theory_source;
-  first.mean_test = v.mean_test;
-  first.cov_test = v.cov_test;
-  first.nees_mean = v.nees_mean;
-  first.verdict = v.verdict;
+  const OrderResult first = v;  // the first-order part, as computed above
   const OrderResult second = order2_result(config, v.simulation, alpha);
-  v.order = order;
-  if (order == 2) {
-    v.theory_mean = second.theory_mean;
-    v.theory_cov = second.theory_cov;
-    v.theory_source = second.theory_source;
-    v.mean_test = second.mean_test;
-    v.cov_test = second.cov_test;
-    v.nees_mean = second.nees_mean;
-    v.verdict = second.verdict;
-    v.other = first;
-  } else {
-    v.other = second;
-  }
+  static_cast<OrderResult&>(v) = order == 2 ? second : first;
+  v.other = order == 2 ? first : second;
   if (config.model_effects.empty()) {
     v.sampled_cov = sampled_covariance(config.path, config.robot);
     v.sampled_cov_test = covariance_test(v.simulation, v.sampled_cov);

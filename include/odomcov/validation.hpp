@@ -29,20 +29,13 @@ struct OrderResult {
   Verdict verdict;
 };
 
-struct Validation {
+/// The simulation against the theory. Its OrderResult part (theory, tests, verdict) is the order
+/// chosen with --order; `other` holds the other order's, computed on the same simulation.
+struct Validation : OrderResult {
   std::int64_t runs = 0;
   std::uint64_t seed = 0;
   double alpha = kDefaultAlpha;
   SampleMoments simulation;
-  Vector3 theory_mean = Vector3::Zero();
-  Matrix3 theory_cov = Matrix3::Zero();
-  std::string theory_source;  // which model produced the theory
-  TestResult mean_test;       // chi^2 with the theory covariance
-  TestResult cov_test;        // LRT of Sigma = Sigma_theory
-  double nees_mean = 0.0;
-  Verdict verdict;
-  // The order the fields above follow (--order), and the other order's results beside it.
-  int order = 1;
   OrderResult other;
   // Beyond the continuous first-order theory (information only, not part of the verdict):
   // the noise-induced mean of propagation.hpp with the chi^2 mean test against it, and the
