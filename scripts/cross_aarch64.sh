@@ -47,6 +47,6 @@ cmake -S "$root" -B "$out/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
       -DCMAKE_TOOLCHAIN_FILE="$root/cmake/toolchains/aarch64-linux-gnu.cmake" \
       -DODOMCOV_AARCH64_SYSROOT="$sysroot" -DODOMCOV_BUILD_BENCHMARKS=OFF -DODOMCOV_BUILD_PYTHON=OFF >/dev/null
 cmake --build "$out/build" --parallel "$(nproc)" -- --quiet
-file "$out/build/src/cli/odomcov" | grep -q "ARM aarch64" || { echo "cross_aarch64: not an aarch64 binary" >&2; exit 1; }
+readelf -h "$out/build/src/cli/odomcov" | grep -q "AArch64" || { echo "cross_aarch64: not an aarch64 binary" >&2; exit 1; }
 cd "$out/build"
 ctest --output-on-failure --parallel "$(nproc)" -R "[.]" "$@"
