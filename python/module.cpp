@@ -109,7 +109,7 @@ py::dict predict_py(const Array& left, const Array& right, double wheelbase, dou
   } else {  // the propagation engine with the model's effects
     const std::vector<Prediction> p = predict_trajectory(pieces, robot, list);
     out["pose"] = stack3(n, [&](std::size_t i) { return p[i].odometry_end_pose; });
-    out["cov"] = stack3x3(n, [&](std::size_t i) { return Matrix3(0.5 * (p[i].cov + p[i].cov.transpose())); });
+    out["cov"] = stack3x3(n, [&](std::size_t i) { return p[i].cov; });  // exactly symmetric
     out["mean"] = stack3(n, [&](std::size_t i) { return p[i].mean; });
   }
   return out;

@@ -28,8 +28,7 @@ const OdometryStep& OdometryCovariance::step(const ArcSegment& wheels) {
   OdometryStep s;
   s.pose_world = pose_out;
   s.J_out_in = T_out * arc_transition(d, a) * T_in.transpose();
-  s.Q_world = tangential_to_world(arc_covariance(wheels, wheelbase_m_, k_), pose_out.z());
-  s.Q_world = 0.5 * (s.Q_world + s.Q_world.transpose());
+  s.Q_world = tangential_to_world(arc_covariance(wheels, wheelbase_m_, k_), pose_out.z());  // symmetric
   // (angle, center) from (left, right): angle = (R - L)/B, center = (L + R)/2.
   Eigen::Matrix2d input_from_wheels;
   input_from_wheels << -1.0 / wheelbase_m_, 1.0 / wheelbase_m_, 0.5, 0.5;

@@ -168,8 +168,13 @@ inline void add_pair(const Node& s, const Node& t, int m, double weight, Complex
 /// 4-point rule at ~1e-9 relative up to k ~ 0.3 m^1/2.
 constexpr double kSecondOrderMaxTravel = 1.0;  // m
 
-std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
+std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
+                               const std::vector<double>& durations_s, double wheelbase_m,
+                               std::vector<double>& refined_durations_s) {
+  // Durations (when given) follow the pieces: summed where pieces merge, split where they are cut.
+  const bool timed = !durations_s.empty();
   std::vector<ArcSegment> merged;
+  std::vector<double> merged_durations;
   merged.reserve(pieces.size());
   for (std::size_t i = 0; i < pieces.size();) {
     std::size_t j = i + 1;
@@ -179,26 +184,39 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces, double whe
     }
     const double count = static_cast<double>(j - i);
     merged.push_back({pieces[i].left_m * count, pieces[i].right_m * count});
+    if (timed) {
+      double span = 0.0;
+      for (std::size_t k = i; k < j; ++k) span += durations_s[k];
+      merged_durations.push_back(span);
+    }
     i = j;
   }
   std::vector<ArcSegment> out;
   out.reserve(merged.size());
-  for (const ArcSegment& seg : merged) {
+  refined_durations_s.clear();
+  for (std::size_t m = 0; m < merged.size(); ++m) {
+    const ArcSegment& seg = merged[m];
     const double cuts =
         std::max({1.0, std::ceil(std::abs(seg.heading_change_rad(wheelbase_m)) / kPieceMaxAngle),
                   std::ceil(std::abs(seg.center_m()) / kSecondOrderMaxTravel)});
     const int n = static_cast<int>(cuts);
-    for (int k = 0; k < n; ++k) out.push_back({seg.left_m / n, seg.right_m / n});
+    for (int k = 0; k < n; ++k) {
+      out.push_back({seg.left_m / n, seg.right_m / n});
+      if (timed) refined_durations_s.push_back(merged_durations[m] / n);
+    }
   }
   return out;
 }
 
 }  // namespace
 
-Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces, const Robot& robot,
+Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
+                                const std::vector<double>& durations_s, const Robot& robot,
                                 const EffectList& effects) {
   const double B = robot.wheelbase_m;
-  const effects::ResolvedPath resolved = effects::resolve(refine(encoder_pieces, B), {}, robot, effects);
+  std::vector<double> refined_durations;
+  const std::vector<ArcSegment> refined = refine(encoder_pieces, durations_s, B, refined_durations);
+  const effects::ResolvedPath resolved = effects::resolve(refined, refined_durations, robot, effects);
   const std::size_t K = resolved.pieces.size();
   Model model;
   model.m = resolved.run_constants;
@@ -328,15 +346,20 @@ std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, do
   return out;
 }
 
+Prediction predict_second_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                                const EffectList& effects) {
+  return predict_second_order(pieces, {}, robot, effects);
+}
+
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
                               const EffectList& effects, int order) {
-  Prediction out = predict(pieces, durations_s, robot, effects);
-  if (order == 1) return out;
-  // The order-2 correction (second order minus first order on the same, possibly coarsened,
-  // pieces) is added to the first-order prediction on the full pieces, which sees every piece's
-  // duration. Both terms of the correction pass through the same measurement hooks.
+  if (order == 1) return predict(pieces, durations_s, robot, effects);
   const std::vector<ArcSegment> coarse = coarsen_pieces(pieces, robot.wheelbase_m);
+  if (coarse.size() == pieces.size()) return predict_second_order(pieces, durations_s, robot, effects);
+  // Fine pieces (a logged run): the first order on them, with every piece's duration, and only
+  // the order-2 correction (second minus first order, both untimed) on the coarsened pieces.
+  Prediction out = predict(pieces, durations_s, robot, effects);
   const Prediction coarse2 = predict_second_order(coarse, robot, effects);
   const Prediction coarse1 = predict(coarse, robot, effects);
   out.noise_mean += coarse2.mean + coarse2.noise_mean - coarse1.mean - coarse1.noise_mean;

@@ -13,8 +13,10 @@ namespace {
 OrderResult order2_result(const Config& config, const SampleMoments& sim, double alpha) {
   OrderResult r;
   r.order = 2;
-  const Prediction p = predict_second_order(model_pieces(config.path, config.robot.wheelbase_m),
-                                            config.robot, config.model_effects);
+  std::vector<double> durations;
+  const std::vector<ArcSegment> pieces =
+      model_pieces(config.path, config.robot.wheelbase_m, &durations);
+  const Prediction p = predict_second_order(pieces, durations, config.robot, config.model_effects);
   r.theory_mean = p.mean + p.noise_mean;
   r.theory_cov = p.cov;
   r.theory_source = "order 2: exact Gaussian-heading moments";

@@ -37,6 +37,10 @@ inline constexpr int kSecondOrderNodes = 4;
 /// enters as it does in the first-order engine.
 Prediction predict_second_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
                                 const EffectList& effects);
+/// The same with each piece's duration, which motion-dependent effects use (speed, time).
+Prediction predict_second_order(const std::vector<ArcSegment>& pieces,
+                                const std::vector<double>& durations_s, const Robot& robot,
+                                const EffectList& effects);
 
 /// Merges consecutive pieces (e.g. the per-sample pieces of a logged run) into pieces that turn
 /// at most kPieceMaxAngle and travel at most kPieceMaxTravel, never merging across a reversal
