@@ -46,6 +46,7 @@ else
     case $target in
       path_config) main=config.yaml ;; sweep) main=sweep.yaml ;; world|roundtrip) main=world.yaml ;;
       suite) main=suite.yaml ;; optiodom) main=notes.txt; dir="$dir/square/20000101"; mkdir -p "$dir" ;;
+      csv_import) main=run-01.csv ;;
     esac
     awk -v dir="$dir" -v main="$main" '
       BEGIN { f = dir "/" main }
@@ -58,6 +59,7 @@ else
       world|roundtrip) check "$name" "0 2" synth "$dir/$main" --out "$work/out.$name" ;;
       suite) check "$name" "0 2" compare "$dir/$main" --json "$work/out.$name" ;;
       optiodom) check "$name" "0 2" import optiodom "$dir" --out "$work/out.$name" ;;
+      csv_import) check "$name" "0 2" import csv "$dir" --wheelbase 0.3 --out "$work/out.$name" ;;
     esac
   done
 fi
