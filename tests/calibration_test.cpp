@@ -5,11 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <boost/math/distributions/normal.hpp>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 
 #include "odomcov/error.hpp"
 #include "odomcov/world.hpp"
+#include "test_util.hpp"
 
 namespace odomcov {
 namespace {
@@ -17,10 +19,9 @@ namespace {
 constexpr double kAlpha = 1e-3;
 const std::string kWorlds = ODOMCOV_SOURCE_DIR "/tests/data/worlds/";
 
-/// Synthesises a world into a temporary directory and loads the suite back.
+/// Synthesises a world into a scratch directory of this build tree and loads the suite back.
 Suite synth_suite(const WorldFile& w, const std::string& tag) {
-  const auto dir = std::filesystem::temp_directory_path() / ("odomcov_cal_" + tag);
-  std::filesystem::create_directories(dir);
+  const auto dir = test::scratch_dir("odomcov_cal_" + tag);
   for (std::size_t i = 0; i < w.experiments.size(); ++i) {
     std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
   }
@@ -121,6 +122,64 @@ TEST(Umbmark, RecoversEdAndEbWithBorensteinsSigns) {
   EXPECT_NEAR(r.wheelbase_corrected, 0.4 * r.Eb, 1e-15);
   EXPECT_LT(r.emax_after, 0.05 * r.emax_before);
   EXPECT_THROW(umbmark(suite, "ccw", "cw", std::nullopt), InputError);
+}
+
+/// The suite's runs as encoder logs: one row per sample of the planned path (cumulative wheel
+/// travel at full precision), the measured end pose on the last row.
+Suite as_logged_suite(const Suite& suite, const std::string& tag) {
+  const auto dir = test::scratch_dir("odomcov_cal_logs_" + tag);
+  std::string yaml = "name: " + suite.name + "-logged\n" + robot_yaml(suite.robot) + "\nexperiments:\n";
+  for (const SuiteExperiment& ex : suite.experiments) {
+    yaml += "  - name: " + ex.name + "\n    logs: [";
+    for (const SuiteRun& run : ex.runs) {
+      const std::string file = ex.name + "-" + run.id + ".csv";
+      std::ofstream log(dir / file);
+      log << "t,left,right,x,y,theta\n";
+      char row[256];
+      double t = 0, left = 0, right = 0;
+      std::snprintf(row, sizeof row, "%.17g,%.17g,%.17g,,,\n", t, left, right);
+      log << row;
+      const std::vector<SampleRun> schedule = sample_schedule(ex.path);
+      for (std::size_t s = 0; s < schedule.size(); ++s) {
+        for (std::int64_t k = 0; k < schedule[s].count; ++k) {
+          t += schedule[s].duration_s, left += schedule[s].increment.left_m;
+          right += schedule[s].increment.right_m;
+          const bool last = s + 1 == schedule.size() && k + 1 == schedule[s].count;
+          if (last) {
+            std::snprintf(row, sizeof row, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", t, left, right,
+                          run.measured.x(), run.measured.y(), run.measured.z());
+          } else {
+            std::snprintf(row, sizeof row, "%.17g,%.17g,%.17g,,,\n", t, left, right);
+          }
+          log << row;
+        }
+      }
+      yaml += (&run == &ex.runs.front() ? "" : ", ") + file;
+    }
+    yaml += "]\n";
+  }
+  std::ofstream(dir / "suite.yaml") << yaml;
+  return load_suite((dir / "suite.yaml").string());
+}
+
+// UMBmark on logged runs: the same squares given as encoder logs (one row per sample) give the
+// UMBmark of the planned paths. The only differences are the rounding of summed samples (the
+// planned path drives a run of equal samples as one arc), far below 1e-9 in each figure.
+TEST(Umbmark, LoggedRunsGiveThePlannedPathsResult) {
+  const Suite planned = synth_suite(load_world(kWorlds + "squares.yaml"), "squares_planned");
+  const Suite logged = as_logged_suite(planned, "squares");
+  ASSERT_TRUE(logged.experiments[0].logged);
+  EXPECT_THROW(umbmark(logged, "cw", "ccw", std::nullopt), InputError);  // the side is not known
+  const UmbmarkResult a = umbmark(planned, "cw", "ccw", std::nullopt);
+  const UmbmarkResult b = umbmark(logged, "cw", "ccw", 4.0);
+  EXPECT_EQ(b.runs_cw, a.runs_cw);
+  EXPECT_EQ(b.runs_ccw, a.runs_ccw);
+  EXPECT_NEAR(b.alpha, a.alpha, 1e-9);
+  EXPECT_NEAR(b.beta, a.beta, 1e-9);
+  EXPECT_NEAR(b.Ed, a.Ed, 1e-9);
+  EXPECT_NEAR(b.Eb, a.Eb, 1e-9);
+  EXPECT_NEAR(b.emax_before, a.emax_before, 1e-9);
+  EXPECT_NEAR(b.emax_after, a.emax_after, 1e-9);
 }
 
 }  // namespace
