@@ -37,9 +37,11 @@ predicted covariance (3 when the predicted spread is right whatever the mean mis
 Usage:
   diagnose_loop.py --odomcov BIN SUITE.yaml --out DIR [--rounds N] [--order 1|2]
                    [--candidates FILE.yaml] [--holdout SUITE.yaml | --train REGEX [--test REGEX]]
+  diagnose_loop.py --odomcov BIN SUITE.yaml --out DIR --render   (the report again, no odomcov run)
 """
 import argparse
 import json
+import math
 import os
 import re
 import subprocess
@@ -137,13 +139,26 @@ def _within(e):
     return float((d.T * q).sum()), 3 * (len(errors) - 1)
 
 
+def heading_z(e):
+    """The experiment's heading-mean misfit in standard errors of its mean, (measured -
+    predicted) / sqrt(P_theta,theta / n), and the turn sense its name ends with (+1 '-ccw',
+    -1 '-cw', else 0)."""
+    var = e["predicted"]["cov"][2][2] / e["n"]
+    z = (e["measured"]["mean"][2] - e["predicted"]["mean"][2]) / math.sqrt(var) if var > 0 else 0.0
+    sense = 1 if e["name"].endswith("-ccw") else -1 if e["name"].endswith("-cw") else 0
+    return z, sense
+
+
 def by_type(experiments):
-    """Per path type: runs, experiments, consistent ones, the pooled NEES per run and the
-    within-experiment NEES (3 when the predicted spread matches the runs' own scatter)."""
+    """Per path type: runs, experiments, consistent ones, the pooled NEES per run, the
+    within-experiment NEES (3 when the predicted spread matches the runs' own scatter), and the
+    heading-mean misfits in standard errors: their RMS (1 when the model is right) and their mean
+    signed by the turn sense (0 when no heading bias is left)."""
     out = {}
     for e in experiments:
         t = out.setdefault(path_type(e["name"]), {"runs": 0, "experiments": 0, "consistent": 0,
-                                                 "nees": 0.0, "_within": 0.0, "_dof": 0})
+                                                 "nees": 0.0, "_within": 0.0, "_dof": 0,
+                                                 "_z": [], "_signed": []})
         t["runs"] += e["n"]
         t["experiments"] += 1
         t["consistent"] += e["verdict"] == "consistent"
@@ -151,21 +166,32 @@ def by_type(experiments):
         q, dof = _within(e)
         t["_within"] += q
         t["_dof"] += dof
+        z, sense = heading_z(e)
+        t["_z"].append(z)
+        if sense:
+            t["_signed"].append(z * sense)
     for t in out.values():
         t["nees"] /= t["runs"]
         t["nees_within"] = 3 * t.pop("_within") / t["_dof"] if t["_dof"] else None
         t.pop("_dof")
+        z, signed = t.pop("_z"), t.pop("_signed")
+        t["heading_z_rms"] = math.sqrt(sum(v * v for v in z) / len(z))
+        t["heading_z_signed_mean"] = sum(signed) / len(signed) if signed else None
     return dict(sorted(out.items()))
 
 
 def compare(odomcov, suite, report, order=None):
-    """`odomcov compare` in brief: log-likelihood, pooled NEES, experiments consistent, and the
-    same per path type."""
+    """`odomcov compare` in brief (summarise)."""
     run([odomcov, "compare", suite, "--json", report] + order_args(order))
+    return summarise(report)
+
+
+def summarise(report):
+    """A compare JSON in brief: log-likelihood, pooled NEES, experiments consistent, and the
+    same per path type."""
     with open(report) as f:
         c = json.load(f)
     runs = sum(e["n"] for e in c["experiments"])
-    types = by_type(c["experiments"])
     within = [_within(e) for e in c["experiments"]]
     within_dof = sum(dof for _, dof in within)
     return {"log_likelihood": c["log_likelihood"],
@@ -173,7 +199,28 @@ def compare(odomcov, suite, report, order=None):
             "nees_within": 3 * sum(q for q, _ in within) / within_dof if within_dof else None,
             "verdict": c["verdict"], "experiments": len(c["experiments"]),
             "consistent_experiments": sum(e["verdict"] == "consistent" for e in c["experiments"]),
-            "by_type": types}
+            "by_type": by_type(c["experiments"])}
+
+
+def resummarise(report, out):
+    """Re-reads every compare JSON a finished loop left in `out` (after this script's summary
+    changed: no odomcov run)."""
+    def again(name):
+        path = os.path.join(out, name)
+        return summarise(path) if os.path.exists(path) else None
+    report["compare_before"] = again("compare-before.json")
+    report["compare_after"] = again("compare-after.json")
+    report["compare_fit"] = again("compare-fit.json")
+    for s in report["rounds"]:
+        if s["named"]:
+            s["compare"] = again(f"compare-round-{s['round'] + 1}.json")
+    held = report.get("holdout")
+    if held:
+        for key in ("compare_after", "compare_fit"):
+            if again(f"holdout-{key}.json"):
+                held[key] = again(f"holdout-{key}.json")
+        held["compare_before"] = again("holdout-before.json")
+    return report
 
 
 def order_args(order):
@@ -302,23 +349,41 @@ def correction_lines(report):
     return lines
 
 
-def type_table(rows_in):
-    """A Markdown table of NEES per path type: rows_in is [(label, compare summary)]. Each cell
-    is the pooled NEES per run, the within-experiment NEES in brackets."""
-    types = sorted({t for _, c in rows_in if c for t in c["by_type"]})
-    rows = ["| model | " + " | ".join(types) + " | pooled |",
-            "|---|" + "---|" * (len(types) + 1)]
+def _nees_cell(t):
+    if t is None:
+        return ""
+    within = "" if t.get("nees_within") is None else f" ({t['nees_within']:.2f})"
+    return f"{t['nees']:.2f}{within}"
 
-    def cell(t):
-        if t is None:
-            return ""
-        within = "" if t.get("nees_within") is None else f" ({t['nees_within']:.2f})"
-        return f"{t['nees']:.2f}{within}"
+
+def _heading_cell(t):
+    if t is None:
+        return ""
+    signed = t.get("heading_z_signed_mean")
+    return ("" if signed is None else f"{signed:+.2f} ") + f"({t['heading_z_rms']:.2f})"
+
+
+def type_table(rows_in, heading=False):
+    """A Markdown table per path type: rows_in is [(label, compare summary)]. Each cell is the
+    pooled NEES per run with the within-experiment NEES in brackets; with heading=True, the
+    heading-mean misfit in standard errors, mean signed by the turn sense, RMS in brackets."""
+    types = sorted({t for _, c in rows_in if c for t in c["by_type"]})
+    rows = ["| model | " + " | ".join(types) + (" |" if heading else " | pooled |"),
+            "|---|" + "---|" * (len(types) + (0 if heading else 1))]
+    cell = _heading_cell if heading else _nees_cell
     for label, c in rows_in:
-        if c:
-            rows.append(f"| {label} | " + " | ".join(cell(c["by_type"].get(t)) for t in types)
-                        + f" | {cell({'nees': c['nees_mean'], 'nees_within': c.get('nees_within')})} |")
+        if not c:
+            continue
+        pooled = "" if heading else \
+            f" {_nees_cell({'nees': c['nees_mean'], 'nees_within': c.get('nees_within')})} |"
+        rows.append(f"| {label} | " + " | ".join(cell(c["by_type"].get(t)) for t in types)
+                    + " |" + pooled)
     return rows
+
+
+HEADING_NOTE = ("Heading-mean misfit per path type, in standard errors of each experiment's mean: "
+                "mean signed by the turn sense (0 when no heading bias is left), RMS in brackets "
+                "(1 when the model is right):")
 
 
 def _round_rows(report):
@@ -338,9 +403,11 @@ def holdout_lines(held):
         rows.append(f"- Held-out runs with the joint fit: {summary(held['compare_fit'])}.")
     rows += ["", "NEES per run by path type on the held-out runs (within-experiment NEES in brackets):",
              ""]
-    rows += type_table([("suite's model", held["compare_before"]),
-                        ("loop's model", held["compare_after"]),
-                        ("joint fit", held.get("compare_fit"))])
+    models = [("suite's model", held["compare_before"]), ("loop's model", held["compare_after"]),
+              ("joint fit", held.get("compare_fit"))]
+    rows += type_table(models)
+    rows += ["", HEADING_NOTE, ""]
+    rows += type_table(models, heading=True)
     return rows
 
 
@@ -373,6 +440,8 @@ def markdown(report):
     rows += ["", "NEES per run by path type, in-sample (within-experiment NEES in brackets; 3 is right):",
              ""]
     rows += type_table(_round_rows(report))
+    rows += ["", HEADING_NOTE, ""]
+    rows += type_table(_round_rows(report), heading=True)
     rows.append("")
     held = report.get("holdout")
     if held:
@@ -451,6 +520,9 @@ def parse_args():
                            "with the model the loop built")
     held.add_argument("--train", metavar="REGEX",
                       help="split SUITE: the loop runs on the experiments whose names match")
+    parser.add_argument("--render", action="store_true",
+                        help="no odomcov run: re-read the compare JSONs of a finished loop in "
+                             "--out, rewrite its loop.json and print its report again")
     parser.add_argument("--test", metavar="REGEX",
                         help="with --train: judge on the experiments whose names match "
                              "(default: every experiment --train leaves out)")
@@ -462,6 +534,13 @@ def parse_args():
 
 def main():
     args = parse_args()
+    if args.render:
+        with open(os.path.join(args.out, "loop.json")) as f:
+            report = resummarise(json.load(f), args.out)
+        with open(os.path.join(args.out, "loop.json"), "w") as f:
+            json.dump(report, f, indent=1)
+        print(markdown(report))
+        return 0
     os.makedirs(args.out, exist_ok=True)
     suite, held = args.suite, None
     if args.train:
