@@ -120,5 +120,9 @@ if want optiodom; then
   loop paths --train '^(square|ivanjko)-' --test '^(circular|free)-'
   loop dec_to_jun --train '-2312' --test '-(2306|2506)'
   loop jun_to_dec --train '-(2306|2506)' --test '-2312'
+  # One table across the four: effects and sizes, NEES and heading bias per path type.
+  save "$out/summary.md" "$python" scripts/loop_summary.py "all=$out/loop_all.json" \
+    "paths=$out/loop_paths.json" "dec_to_jun=$out/loop_dec_to_jun.json" \
+    "jun_to_dec=$out/loop_jun_to_dec.json"
 fi
 echo "results regenerated in $results" >&2
