@@ -41,7 +41,10 @@ TEST(Compare, PlainWorldIsConsistentAndHiddenEffectsAreNamed) {
   EXPECT_EQ(bad.verdict, "inconsistent");
   ASSERT_FALSE(bad.failures.empty());
   // The wheelbase error shows first on the long spin, as a heading mean.
-  EXPECT_EQ(bad.failures.front().rfind("spin-cw-720: theta mean", 0), 0u) << bad.failures.front();
+  const Failure& worst = bad.failures.front();
+  EXPECT_EQ(worst.kind, Failure::Kind::mean);
+  EXPECT_EQ(bad.experiments.at(static_cast<std::size_t>(worst.experiment)).name, "spin-cw-720");
+  EXPECT_EQ(worst.component, 2);  // theta
   // With the hidden effects in the model, the same data are consistent.
   SuiteModel informed = suite_model(lab);
   informed.effects = {{"wheel_diameter_ratio", {1.003}}, {"wheelbase_error", {1.01}}};
