@@ -26,7 +26,7 @@ was learnt on some runs predict the others? With --train REGEX (and optionally -
 suite is split instead: the loop runs on the experiments whose names match --train, and its
 models are judged on those matching --test (default: every other experiment). E.g. the path-type
 hold-out of OptiOdom is --train '^(square|ivanjko)-' --test '^(circular|free)-', a campaign
-hold-out --train -2312 --test '-(2306|2506)'.
+hold-out --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'.
 
 Every compare is also summarised per path type, the experiment name's prefix before the first
 '-' (square-..., circular-...): the pooled NEES per run (3 when the model is right), and the

@@ -118,8 +118,8 @@ if want optiodom; then
   save "$out/model_all.yaml" sed -n '/^robot:/p; /^model:/,/^experiments:/{/^experiments:/!p}' \
     "$suite-loop-all/suite.yaml"
   loop paths --train '^(square|ivanjko)-' --test '^(circular|free)-'
-  loop dec_to_jun --train '-2312' --test '-(2306|2506)'
-  loop jun_to_dec --train '-(2306|2506)' --test '-2312'
+  loop dec_to_jun --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'
+  loop jun_to_dec --train '^[a-z]+-(2306|2506)' --test '^[a-z]+-2312'
   # One table across the four: effects and sizes, NEES and heading bias per path type.
   save "$out/summary.md" "$python" scripts/loop_summary.py "all=$out/loop_all.json" \
     "paths=$out/loop_paths.json" "dec_to_jun=$out/loop_dec_to_jun.json" \
