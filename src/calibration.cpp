@@ -35,9 +35,7 @@ struct Handle {
       case Kind::wheelbase: return m.robot.wheelbase_m;
       case Kind::effect: break;
     }
-    for (EffectSpec& e : m.effects) {
-      if (e.name == effect) return e.values[index];
-    }
+    if (EffectSpec* e = find_spec(m.effects, effect)) return e->values[index];
     throw std::logic_error("fit: effect not in the model");
   }
   double to_u(double v) const {
@@ -92,7 +90,7 @@ Handle make_handle(const std::string& name, const SuiteModel& model) {
   const std::size_t dot = name.find('.');
   h.kind = Handle::Kind::effect;
   h.effect = name.substr(0, dot);
-  const EffectInfo* info = find_effect(h.effect);
+  const EffectInfo* info = find_effect(h.effect, model.effects);
   const std::string param = name.substr(dot + 1);
   for (std::size_t i = 0; i < info->parameters.size(); ++i) {
     if (info->parameters[i].name == param) h.index = i;
@@ -159,14 +157,14 @@ double negative_log_likelihood(const Suite& suite, SuiteModel& model,
 
 }  // namespace
 
-std::string check_fit_parameter(const std::string& name) {
+std::string check_fit_parameter(const std::string& name, const EffectList& context) {
   if (name == "k_left" || name == "k_right" || name == "wheelbase") return "";
   const std::size_t dot = name.find('.');
   if (dot == std::string::npos) {
     return "unknown parameter '" + name +
            "' (use k_left, k_right, wheelbase or <effect>.<parameter>)";
   }
-  const EffectInfo* info = find_effect(name.substr(0, dot));
+  const EffectInfo* info = find_effect(name.substr(0, dot), context);
   if (!info) return "unknown effect in '" + name + "'";
   for (const EffectParameterInfo& p : info->parameters) {
     if (p.name == name.substr(dot + 1)) return "";
@@ -186,9 +184,7 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
     const std::size_t dot = name.find('.');
     if (dot == std::string::npos) continue;
     const std::string effect = name.substr(0, dot);
-    bool present = false;
-    for (const EffectSpec& e : model.effects) present = present || e.name == effect;
-    if (!present) {
+    if (!find_spec(model.effects, effect)) {
       EffectSpec spec{effect, {}};
       for (const EffectParameterInfo& p : find_effect(effect)->parameters) spec.values.push_back(p.typical);
       model.effects.push_back(spec);

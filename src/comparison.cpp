@@ -166,7 +166,7 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
   // [Mardia74]: E b2 = p(p+2)(n-1)/(n+1),
   // Var b2 = 8p(p+2)(n-3)(n-p-1)(n-p+1)/((n+1)^2 (n+3)(n+5)), z = sum n(b2 - E)/sqrt(sum n^2 Var).
   bool tails_expected = false;
-  for (const EffectSpec& e : model.effects) tails_expected = tails_expected || find_effect(e.name)->heavy_tails;
+  for (const EffectSpec& e : model.effects) tails_expected = tails_expected || info_of(e)->heavy_tails;
   double excess = 0.0, variance = 0.0, weight = 0.0, b2_sum = 0.0;
   std::vector<double> kurtosis_ratio(suite.experiments.size(), 1.0);  // b2/E b2 per experiment
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {

@@ -39,17 +39,17 @@ std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<Run
 
 /// Systematic candidates move the mean and are judged on the full likelihood; the others only
 /// add randomness and are judged on the scatter part, which a mean misfit cannot inflate.
-bool systematic(const std::string& effect) {
-  return effect != kWheelNoiseLevel && find_effect(effect)->systematic;
+bool systematic(const std::string& effect, const EffectList& context) {
+  return effect != kWheelNoiseLevel && find_effect(effect, context)->systematic;
 }
 
 /// The parameters a candidate fits. bumps: only the rate; a Gaussian likelihood sees rate and
 /// sigma only through rate sigma^2, so sigma stays at its typical size there (see bumps_sigma).
-std::vector<std::string> fitted_names(const std::string& effect) {
+std::vector<std::string> fitted_names(const std::string& effect, const EffectList& context) {
   if (effect == kWheelNoiseLevel) return {"k_left", "k_right"};
   if (effect == "bumps") return {"bumps.rate"};
   std::vector<std::string> names;
-  for (const EffectParameterInfo& p : find_effect(effect)->parameters) names.push_back(effect + "." + p.name);
+  for (const EffectParameterInfo& p : find_effect(effect, context)->parameters) names.push_back(effect + "." + p.name);
   return names;
 }
 
@@ -60,8 +60,8 @@ struct FittedNames {
 FittedNames split_fitted_names(const EffectList& effects) {
   FittedNames out;
   for (const EffectSpec& e : effects) {
-    for (const std::string& n : fitted_names(e.name)) {
-      (systematic(e.name) ? out.systematic : out.random).push_back(n);
+    for (const std::string& n : fitted_names(e.name, effects)) {
+      (systematic(e.name, effects) ? out.systematic : out.random).push_back(n);
     }
   }
   return out;
@@ -84,9 +84,9 @@ SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* 
 /// True when every fitted parameter's "no effect" value is the edge of its range (a size that
 /// cannot be negative): the likelihood-ratio statistic is then a 50:50 mixture of chi^2_0 and
 /// chi^2_dof [Self87], so the p-value is half the chi^2 one.
-bool on_boundary(const std::string& effect) {
+bool on_boundary(const std::string& effect, const EffectList& context) {
   if (effect == kWheelNoiseLevel) return false;
-  for (const EffectParameterInfo& p : find_effect(effect)->parameters) {
+  for (const EffectParameterInfo& p : find_effect(effect, context)->parameters) {
     if (!(p.neutral == p.lower && !p.open_lower)) return false;
   }
   return true;
@@ -141,7 +141,8 @@ double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
 }  // namespace
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
-                   const std::vector<std::string>& only, DiagnoseProgress* progress) {
+                   const std::vector<std::string>& only, DiagnoseProgress* progress,
+                   const EffectList& candidates) {
   Diagnosis d;
   d.alpha = alpha;
   d.runs = run_count(suite);
@@ -162,9 +163,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
 
   std::vector<std::string> names;
   for (const EffectInfo& info : effect_catalogue()) {
-    bool in_model = false;
-    for (const EffectSpec& e : model.effects) in_model = in_model || e.name == info.name;
-    if (!in_model) names.push_back(info.name);
+    if (!find_spec(model.effects, info.name)) names.push_back(info.name);
   }
   names.push_back(kWheelNoiseLevel);
   if (!only.empty()) {
@@ -174,6 +173,13 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     }
     names = kept;
   }
+  // The user's own candidates (custom, or catalogue ones with their starting values) join the
+  // list; each enters the fit from its given start.
+  for (const EffectSpec& c : candidates) {
+    if (!find_spec(model.effects, c.name) && std::find(names.begin(), names.end(), c.name) == names.end()) {
+      names.push_back(c.name);
+    }
+  }
 
   // The fits: the base refit, one per candidate and the winner's refit.
   if (progress) progress->fits_total = static_cast<std::int64_t>(names.size()) + 2;
@@ -181,12 +187,14 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   for (const std::string& name : names) {
     Candidate c;
     c.effect = name;
-    c.systematic = systematic(name);
+    SuiteModel start = base;
+    if (const EffectSpec* given = find_spec(candidates, name)) start.effects.push_back(*given);
+    c.systematic = systematic(name, start.effects);
     std::vector<std::string> fitted = c.systematic ? nuisance.systematic : nuisance.random;
-    const std::vector<std::string> own = fitted_names(name);
+    const std::vector<std::string> own = fitted_names(name, start.effects);
     fitted.insert(fitted.end(), own.begin(), own.end());
     const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
-    const FitResult f = fit(suite, base, fitted, kind, progress ? &progress->evaluations : nullptr);
+    const FitResult f = fit(suite, start, fitted, kind, progress ? &progress->evaluations : nullptr);
     // With heavy tails the observed information understates the uncertainty: sandwich SEs.
     const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
     c.model = f.model;
@@ -203,7 +211,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       lr /= before.mardia_b2 / before.mardia_expected;
     }
     lr = std::max(0.0, lr);
-    c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
+    c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name, start.effects) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
     const auto offset = static_cast<Eigen::Index>(fitted.size() - own.size());
     if (name == kWheelNoiseLevel) {
       c.parameters = {"k_left", "k_right"};
@@ -211,8 +219,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       c.stderrs = {se(offset), se(offset + 1)};
     } else if (name == "bumps") {
       // q = rate sigma^2 is what the likelihood fitted; sigma comes from the tails.
-      EffectSpec* spec = nullptr;
-      for (EffectSpec& e : c.model.effects) spec = e.name == "bumps" ? &e : spec;
+      EffectSpec* spec = find_spec(c.model.effects, "bumps");
       const double sigma_fixed = spec->values[1];
       const double q = f.values(offset) * sigma_fixed * sigma_fixed;
       const double q_se = se(offset) * sigma_fixed * sigma_fixed;
@@ -281,9 +288,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     if (best.effect == kWheelNoiseLevel) {
       best.values = {best.model.robot.noise.k_left, best.model.robot.noise.k_right};
     } else {
-      for (const EffectSpec& e : best.model.effects) {
-        if (e.name == best.effect) best.values = e.values;  // bumps: sigma stays, rate refitted
-      }
+      best.values = find_spec(best.model.effects, best.effect)->values;  // bumps: sigma stays, rate refitted
     }
   }
   if (progress) progress->fits_done = progress->fits_total.load();
@@ -304,7 +309,7 @@ std::string explain(const Candidate& c) {
     text = "wheel noise at another level than the model's: ";
     signature = "variance off in every experiment, growing with distance as wheel noise does";
   } else {
-    const EffectInfo* info = find_effect(c.effect);
+    const EffectInfo* info = find_effect(c.effect, c.model.effects);
     text = info->physics + ": ";
     signature = info->signature;
   }
@@ -362,10 +367,8 @@ std::string candidate_yaml(const Candidate& c, const SuiteModel& model) {
     robot.noise.k_right = c.values[1];
     return robot_yaml(robot);
   }
-  for (const EffectSpec& e : c.model.effects) {
-    if (e.name == c.effect) return effect_yaml(e);
-  }
-  return "";
+  const EffectSpec* e = find_spec(c.model.effects, c.effect);
+  return e ? effect_yaml(*e) : "";
 }
 
 }  // namespace odomcov

@@ -73,7 +73,7 @@ struct Diagnosis {
 };
 
 /// Runs every candidate (all catalogue effects not in the model plus wheel_noise_level, or the
-/// `only` subset). Parameters of effects already in the model are refitted alongside each
+/// `only` subset, plus the user's `candidates`). Parameters of effects already in the model are refitted alongside each
 /// candidate, and the likelihood gain is measured against that refitted model.
 ///
 /// Each candidate is fitted and judged on the part of the Gaussian likelihood it explains:
@@ -92,8 +92,11 @@ struct DiagnoseProgress {
   std::atomic<std::int64_t> fits_done{0};
   std::atomic<std::int64_t> evaluations{0};
 };
+/// `candidates`: the user's own hypotheses (custom effects, or catalogue effects with starting
+/// values), tried beside the catalogue from their given values (diagnose --candidates).
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
-                   const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr);
+                   const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr,
+                   const EffectList& candidates = {});
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts

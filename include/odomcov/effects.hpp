@@ -4,6 +4,7 @@
 // its implementations live in src/effects/, one file per effect.
 #pragma once
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -14,14 +15,18 @@ namespace odomcov {
 /// At most this many effects in one list: each has its own random-stream slot (random.hpp).
 inline constexpr std::size_t kMaxEffects = 16;
 
-/// One effect with its parameter values, in the catalogue's parameter order.
+struct CustomEffect;
+
+/// One effect with its parameter values, in the catalogue's parameter order (for a custom
+/// effect, in the order of its definition's parameters).
 struct EffectSpec {
   std::string name;
   std::vector<double> values;
+  /// The definition of a custom effect (docs/effects.md, "Custom effects"); null for a
+  /// catalogue effect.
+  std::shared_ptr<const CustomEffect> custom = nullptr;
 
-  bool operator==(const EffectSpec& other) const {
-    return name == other.name && values == other.values;
-  }
+  bool operator==(const EffectSpec& other) const;
 };
 using EffectList = std::vector<EffectSpec>;
 
@@ -50,10 +55,60 @@ struct EffectInfo {
   bool heavy_tails = false;
 };
 
+/// A custom effect, defined in YAML: its own parameters and up to four expressions over the
+/// per-sample variables (custom_effect_variables) and the parameters, evaluated by muparser.
+/// An empty expression means 1. true travel of each wheel = scale x scale_<wheel> x encoder,
+/// true wheelbase = wheelbase_factor x nominal. Build it with define_custom_effect.
+struct CustomEffect {
+  /// One expression and where it was written (file, line, dotted key) for runtime errors.
+  struct Expression {
+    std::string text;  // "" = 1
+    std::string file;
+    int line = 0;
+    std::string key;
+  };
+  std::string name;
+  std::vector<std::string> parameters;
+  std::string file;  // where the definition was written, for messages
+  int line = 0;
+  std::string key;
+  Expression scale, scale_left, scale_right, wheelbase_factor;
+  /// The description fit and diagnose use: parameters unbounded and signed (identity fit
+  /// transform), neutral at the starting value; systematic.
+  EffectInfo info;
+
+  bool operator==(const CustomEffect& other) const;
+};
+
+/// The per-sample variables a custom effect's expressions may use, in the SPEC's order:
+/// v, kappa, r, dir, turn, s, t.
+const std::vector<std::string>& custom_effect_variables();
+
+/// "" when `text` compiles with the variables and these parameter names, else muparser's
+/// message (e.g. "Unexpected token \"x\" found at position 4.").
+std::string check_custom_expression(const std::string& text,
+                                    const std::vector<std::string>& parameters);
+
+/// "" when `name` can name a custom effect or one of its parameters (an identifier of letters,
+/// digits and '_', not starting with a digit, not a variable's name), else why not.
+std::string check_custom_name(const std::string& name);
+
+/// Builds a custom effect definition and its spec with the starting values. Throws InputError
+/// (file, line and key of the offending expression) for a bad expression or name, or a name
+/// that clashes with a catalogue effect.
+EffectSpec define_custom_effect(CustomEffect definition, const std::vector<double>& start);
+
 /// Every effect of the catalogue, in the order of docs/formats.md.
 const std::vector<EffectInfo>& effect_catalogue();
-/// nullptr when unknown.
-const EffectInfo* find_effect(const std::string& name);
+/// The one lookup of an effect by name: a custom effect defined in `context` (a model's or a
+/// candidate list's effects) first, then the catalogue; nullptr when unknown.
+const EffectInfo* find_effect(const std::string& name, const EffectList& context = {});
+/// The description of a spec: its custom definition's, or the catalogue's (nullptr when
+/// unknown).
+const EffectInfo* info_of(const EffectSpec& spec);
+/// The spec named `name` in `list`; nullptr when absent.
+const EffectSpec* find_spec(const EffectList& list, const std::string& name);
+EffectSpec* find_spec(EffectList& list, const std::string& name);
 
 /// "" when the values are valid for the effect, else what is wrong ("Ed must be > 0").
 std::string check_effect(const EffectSpec& spec);
@@ -73,7 +128,8 @@ class EffectError : public InputError {
 /// resolve) calls it.
 void check_effects(const EffectList& list);
 
-/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}".
+/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}", or for a custom
+/// effect its whole definition with the current values as starting values, on one line.
 std::string effect_yaml(const EffectSpec& spec);
 
 }  // namespace odomcov

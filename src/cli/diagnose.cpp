@@ -1,10 +1,11 @@
-// odomcov diagnose SUITE.yaml [--effects a,b,...] [--alpha A] [--json FILE]
+// odomcov diagnose SUITE.yaml [--effects a,b,...] [--candidates FILE.yaml] [--alpha A] [--json FILE]
 // Which physical effect is the model missing? Fitted size, evidence, and the YAML to add it.
 #include <cmath>
 #include <iostream>
 #include <sstream>
 
 #include "commands.hpp"
+#include "odomcov/config.hpp"
 #include "odomcov/diagnosis.hpp"
 #include "odomcov/format.hpp"
 #include "output.hpp"
@@ -16,6 +17,7 @@ namespace {
 struct DiagnoseOptions {
   std::string suite;
   std::vector<std::string> effects;
+  std::string candidates;
   double alpha = kDiagnoseAlpha;
   std::string json;
   int order = 2;
@@ -40,6 +42,14 @@ int run_diagnose(const DiagnoseOptions& opt) {
   }
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
+  const EffectList own = opt.candidates.empty() ? EffectList{} : load_effects(opt.candidates);
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    if (find_spec(suite.model_effects, own[i].name)) {
+      const int line = own[i].custom ? own[i].custom->line : 0;
+      throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
+                       "name clash: " + quote(own[i].name) + " is already in the suite's model");
+    }
+  }
   check_order(opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
@@ -48,7 +58,7 @@ int run_diagnose(const DiagnoseOptions& opt) {
   ProgressBar bar([&progress] { return progress.fits_done.load(); },
                   std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
                   "fits");
-  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress);
+  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress, own);
   bar.finish();
 
   std::ostringstream out;
@@ -166,6 +176,9 @@ void setup_diagnose(CLI::App& app, int& exit_code) {
                   "Candidates to try (default: every catalogue effect not in the model, and "
                   "wheel_noise_level)")
       ->delimiter(',');
+  cmd->add_option("--candidates", opt->candidates,
+                  "YAML list of your own candidate effects (custom, or catalogue ones with starting "
+                  "values), ranked beside the catalogue");
   cmd->add_option("--alpha", opt->alpha, "Family-wise significance level over the candidates")
       ->capture_default_str();
   cmd->add_option("--order", opt->order,

@@ -24,16 +24,17 @@ struct FitOptions {
 int run_fit(const FitOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
   if (opt.params.empty()) throw UsageError("--params needs at least one parameter");
+  check_order(opt.order);
+  const Suite suite = load_suite(opt.suite);
+  // After loading: the suite's custom effects' parameters can be fitted too.
   for (std::size_t i = 0; i < opt.params.size(); ++i) {
-    if (const std::string e = check_fit_parameter(opt.params[i]); !e.empty()) {
+    if (const std::string e = check_fit_parameter(opt.params[i], suite.model_effects); !e.empty()) {
       throw UsageError("--params: " + e);
     }
     for (std::size_t j = 0; j < i; ++j) {
       if (opt.params[j] == opt.params[i]) throw UsageError("--params: " + opt.params[i] + " given twice");
     }
   }
-  check_order(opt.order);
-  const Suite suite = load_suite(opt.suite);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
   check_finite_start(suite, model, "fit");

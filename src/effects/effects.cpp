@@ -14,15 +14,34 @@ const std::vector<EffectInfo>& effect_catalogue() {
   return infos;
 }
 
-const EffectInfo* find_effect(const std::string& name) {
+const EffectSpec* find_spec(const EffectList& list, const std::string& name) {
+  for (const EffectSpec& spec : list) {
+    if (spec.name == name) return &spec;
+  }
+  return nullptr;
+}
+
+EffectSpec* find_spec(EffectList& list, const std::string& name) {
+  return const_cast<EffectSpec*>(find_spec(static_cast<const EffectList&>(list), name));
+}
+
+const EffectInfo* find_effect(const std::string& name, const EffectList& context) {
+  const EffectSpec* spec = find_spec(context, name);
+  if (spec && spec->custom) return &spec->custom->info;
   for (const EffectInfo& info : effect_catalogue()) {
     if (info.name == name) return &info;
   }
   return nullptr;
 }
 
+const EffectInfo* info_of(const EffectSpec& spec) {
+  return spec.custom ? &spec.custom->info : find_effect(spec.name);
+}
+
 std::string check_effect(const EffectSpec& spec) {
-  const EffectInfo* info = find_effect(spec.name);
+  if (spec.custom && spec.custom->name != spec.name) return "custom effect named '" + spec.custom->name + "'";
+  if (spec.custom && find_effect(spec.name)) return "custom effect '" + spec.name + "' has a catalogue effect's name";
+  const EffectInfo* info = info_of(spec);
   if (!info) return "unknown effect '" + spec.name + "'";
   if (spec.values.size() != info->parameters.size()) {
     return spec.name + " takes " + std::to_string(info->parameters.size()) + " parameters";
@@ -42,7 +61,37 @@ std::string check_effect(const EffectSpec& spec) {
   return "";
 }
 
+namespace {
+
+/// A YAML double-quoted scalar.
+std::string yaml_quoted(const std::string& text) {
+  std::string out = "\"";
+  for (char c : text) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+std::string custom_yaml(const EffectSpec& spec) {
+  const CustomEffect& def = *spec.custom;
+  std::string text = "- custom: {name: " + def.name + ", parameters: {";
+  for (std::size_t i = 0; i < def.parameters.size(); ++i) {
+    text += (i ? ", " : "") + def.parameters[i] + ": " + format_number(spec.values[i]);
+  }
+  text += "}";
+  for (const auto& [key, e] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
+                               std::pair{"scale_right", &def.scale_right},
+                               std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+    if (!e->text.empty()) text += std::string(", ") + key + ": " + yaml_quoted(e->text);
+  }
+  return text + "}";
+}
+
+}  // namespace
+
 std::string effect_yaml(const EffectSpec& spec) {
+  if (spec.custom) return custom_yaml(spec);
   const EffectInfo* info = find_effect(spec.name);
   std::string text = "- " + spec.name + ": {";
   for (std::size_t i = 0; i < spec.values.size(); ++i) {
@@ -119,7 +168,9 @@ const EffectType& type_of(const std::string& name) {
 std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
   check_effects(list);
   std::vector<std::unique_ptr<Effect>> out;
-  for (const EffectSpec& spec : list) out.push_back(type_of(spec.name).make(spec.values));
+  for (const EffectSpec& spec : list) {
+    out.push_back(spec.custom ? make_custom(spec) : type_of(spec.name).make(spec.values));
+  }
   return out;
 }
 
