@@ -188,6 +188,11 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
     const std::string effect = name.substr(0, dot);
     bool present = false;
     for (const EffectSpec& e : model.effects) present = present || e.name == effect;
+    if (!present && find_effect(effect)->grouped) {
+      throw EffectError("--params", name + ": add " + effect +
+                                        " with the parameter it varies to the model first, e.g. "
+                                        "- group_variation: {parameter: wheelbase_error.Eb, sd: 0}");
+    }
     if (!present) {
       EffectSpec spec{effect, {}};
       for (const EffectParameterInfo& p : find_effect(effect)->parameters) spec.values.push_back(p.typical);

@@ -20,6 +20,7 @@ void emit_effects(YAML::Emitter& out, const EffectList& effects) {
       throw std::invalid_argument("suite_yaml: unknown effect or wrong parameter count: " + e.name);
     }
     out << YAML::BeginMap << YAML::Key << e.name << YAML::Value << YAML::Flow << YAML::BeginMap;
+    if (!e.target.empty()) out << YAML::Key << "parameter" << YAML::Value << e.target;
     for (std::size_t i = 0; i < e.values.size(); ++i) {
       out << YAML::Key << info->parameters[i].name << YAML::Value << e.values[i];
     }
@@ -52,6 +53,7 @@ std::string suite_yaml(const SuiteDocument& suite) {
   out << YAML::Key << "experiments" << YAML::Value << YAML::BeginSeq;
   for (const SuiteDocument::Experiment& ex : suite.experiments) {
     out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << YAML::DoubleQuoted << ex.name;
+    if (!ex.group.empty()) out << YAML::Key << "group" << YAML::Value << YAML::DoubleQuoted << ex.group;
     if (!ex.logs.empty()) {
       out << YAML::Key << "logs" << YAML::Value << YAML::BeginSeq;
       for (const std::string& log : ex.logs) out << YAML::DoubleQuoted << log;
