@@ -184,7 +184,13 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
     const std::size_t dot = name.find('.');
     if (dot == std::string::npos) continue;
     const std::string effect = name.substr(0, dot);
-    if (!find_spec(model.effects, effect)) {
+    const bool present = find_spec(model.effects, effect) != nullptr;
+    if (!present && find_effect(effect)->grouped) {
+      throw EffectError("--params", name + ": add " + effect +
+                                        " with the parameter it varies to the model first, e.g. "
+                                        "- group_variation: {parameter: wheelbase_error.Eb, sd: 0}");
+    }
+    if (!present) {
       EffectSpec spec{effect, {}};
       for (const EffectParameterInfo& p : find_effect(effect)->parameters) spec.values.push_back(p.typical);
       model.effects.push_back(spec);

@@ -163,7 +163,7 @@ bool CustomEffect::operator==(const CustomEffect& o) const {
 
 bool EffectSpec::operator==(const EffectSpec& o) const {
   const bool same_custom = custom == o.custom || (custom && o.custom && *custom == *o.custom);
-  return name == o.name && values == o.values && same_custom;
+  return name == o.name && values == o.values && target == o.target && same_custom;
 }
 
 EffectSpec define_custom_effect(CustomEffect def, const std::vector<double>& start) {
