@@ -23,12 +23,12 @@ struct CustomEffect;
 struct EffectSpec {
   std::string name;
   std::vector<double> values;
-  /// The definition of a custom effect (docs/effects.md, "Custom effects"); null for a
-  /// catalogue effect.
-  std::shared_ptr<const CustomEffect> custom = nullptr;
   /// group_variation only: the parameter it varies between groups, "<effect>.<parameter>" of
   /// another effect in the same list (e.g. "wheelbase_error.Eb"); empty for every other effect.
   std::string target = {};
+  /// The definition of a custom effect (docs/effects.md, "Custom effects"); null for a
+  /// catalogue effect.
+  std::shared_ptr<const CustomEffect> custom = nullptr;
 
   bool operator==(const EffectSpec& other) const;
 };

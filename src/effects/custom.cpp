@@ -195,7 +195,7 @@ EffectSpec define_custom_effect(CustomEffect def, const std::vector<double>& sta
       fail_at(*e, error);
     }
   }
-  return EffectSpec{shared->name, start, shared};
+  return EffectSpec{shared->name, start, {}, shared};
 }
 
 namespace effects {
