@@ -11,6 +11,8 @@
 #include <fstream>
 #include <random>
 
+#include <tbb/task_arena.h>
+
 #include "odomcov/calibration.hpp"
 #include "odomcov/comparison.hpp"
 #include "odomcov/diagnosis.hpp"
@@ -246,6 +248,21 @@ TEST(GroupDiagnose, NamesTheGroupVariationAndOnlyWhenThereIsOne) {
   for (const Candidate& c : none.candidates) {
     if (c.effect.rfind(kGroupVariation, 0) == 0) EXPECT_FALSE(c.significant) << c.effect << " p " << c.p_value;
   }
+}
+
+TEST(GroupLikelihood, LoggedRunsTheSameWhateverTheThreads) {
+  // Logged runs are predicted in parallel, each with its group column; the grouped likelihood
+  // is the same on one thread and on all.
+  Suite suite = load_suite(ODOMCOV_SOURCE_DIR "/tests/data/suites/good_logs.yaml");
+  suite.experiments[0].group = "day-1";
+  SuiteModel model = suite_model(suite);
+  model.effects = {{"wheelbase_error", {1.01}}, {kGroupVariation, {0.01}, "wheelbase_error.Eb"}};
+  double one = 0.0;
+  tbb::task_arena(1).execute([&] { one = log_likelihood(residuals(suite, model)); });
+  const auto res = residuals(suite, model);
+  EXPECT_EQ(log_likelihood(res), one);
+  EXPECT_GT(res[0][0].group_column.norm(), 0.0);
+  EXPECT_EQ(res[0][0].group, res[0][1].group);
 }
 
 TEST(GroupSuite, BadTargetsAreBadInput) {
