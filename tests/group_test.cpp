@@ -11,8 +11,11 @@
 #include <fstream>
 #include <random>
 
+#include <tbb/task_arena.h>
+
 #include "odomcov/calibration.hpp"
 #include "odomcov/comparison.hpp"
+#include "odomcov/diagnosis.hpp"
 #include "odomcov/error.hpp"
 #include "odomcov/likelihood.hpp"
 #include "odomcov/world.hpp"
@@ -130,6 +133,11 @@ TEST(GroupWorld, OneDrawPerGroupWhateverTheThreads) {
   EXPECT_NE(a, group_effects(w.world.effects, w.seed, "group:day-2"));
   EXPECT_NE(a, group_effects(w.world.effects, w.seed + 1, "group:day-1"));
   for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(synthesize(w, i, 1), synthesize(w, i, 3));
+  std::printf("the world's sessions draw Eb =");
+  for (int day = 1; day <= 6; ++day) {
+    std::printf(" %.5f", group_effects(w.world.effects, w.seed, "group:day-" + std::to_string(day))[0].values[0]);
+  }
+  std::printf("\n");
   // The draws are N(value, sd^2): over 4000 groups the sample mean lies within 4.42 standard
   // errors (two-sided alpha = 1e-5) and (n-1) s^2/sd^2 within its chi^2 quantiles at alpha 1e-5.
   const int n = 4000;
@@ -217,6 +225,44 @@ TEST(GroupWorld, FitFindsTheSpreadAndAHeldOutGroupIsPredictedWithIt) {
   const Vector3 u = res[0][0].group_column;
   EXPECT_GT(u.norm(), 0.0);
   EXPECT_LT((own[0][0].cov - res[0][0].cov - u * u.transpose()).norm(), 1e-15);
+}
+
+TEST(GroupDiagnose, NamesTheGroupVariationAndOnlyWhenThereIsOne) {
+  // The model knows the wheelbase error (refitted by diagnose); the candidates are the group
+  // variations of Eb and Ed and the effects nearest to them. Family-wise alpha 0.01.
+  WorldFile w = load_world(kWorld);
+  const SuiteModel model = world_model(w, {{"wheelbase_error", {1.0}}});
+  const std::vector<std::string> only = {kGroupVariation, "turn_dependent_wheelbase",
+                                         "wheel_diameter_ratio", "per_run_radius"};
+  const Diagnosis d = diagnose(synth_suite(w, "odomcov_group_diagnose"), model, kDiagnoseAlpha, only);
+  ASSERT_TRUE(d.best);
+  const Candidate& best = d.candidates[*d.best];
+  std::printf("%s\n", explain(best).c_str());
+  EXPECT_EQ(best.effect, "group_variation(wheelbase_error.Eb)");
+  EXPECT_EQ(best.parameters, (std::vector<std::string>{"sd"}));
+  EXPECT_TRUE(d.explained);
+  EXPECT_EQ(candidate_yaml(best, model).rfind("- group_variation: {parameter: wheelbase_error.Eb, sd: ", 0), 0u);
+  // The same world with no spread: no group candidate is significant.
+  w.world.effects[1].values[0] = 0.0;
+  const Diagnosis none = diagnose(synth_suite(w, "odomcov_group_diagnose_none"), model, kDiagnoseAlpha, only);
+  for (const Candidate& c : none.candidates) {
+    if (c.effect.rfind(kGroupVariation, 0) == 0) EXPECT_FALSE(c.significant) << c.effect << " p " << c.p_value;
+  }
+}
+
+TEST(GroupLikelihood, LoggedRunsTheSameWhateverTheThreads) {
+  // Logged runs are predicted in parallel, each with its group column; the grouped likelihood
+  // is the same on one thread and on all.
+  Suite suite = load_suite(ODOMCOV_SOURCE_DIR "/tests/data/suites/good_logs.yaml");
+  suite.experiments[0].group = "day-1";
+  SuiteModel model = suite_model(suite);
+  model.effects = {{"wheelbase_error", {1.01}}, {kGroupVariation, {0.01}, "wheelbase_error.Eb"}};
+  double one = 0.0;
+  tbb::task_arena(1).execute([&] { one = log_likelihood(residuals(suite, model)); });
+  const auto res = residuals(suite, model);
+  EXPECT_EQ(log_likelihood(res), one);
+  EXPECT_GT(res[0][0].group_column.norm(), 0.0);
+  EXPECT_EQ(res[0][0].group, res[0][1].group);
 }
 
 TEST(GroupSuite, BadTargetsAreBadInput) {
