@@ -60,8 +60,12 @@
 // where it is smooth. Cost: (QK)^2/2 + K Q^2 pair evaluations.
 #include "odomcov/second_order.hpp"
 
+#include "odomcov/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
+#include <string>
+#include <stdexcept>
 #include <complex>
 
 #include "effects/effect.hpp"
@@ -210,12 +214,21 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
 
 }  // namespace
 
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
+  std::vector<double> unused;
+  return refine(pieces, {}, wheelbase_m, unused).size();
+}
+
 Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
                                 const std::vector<double>& durations_s, const Robot& robot,
                                 const EffectList& effects) {
   const double B = robot.wheelbase_m;
   std::vector<double> refined_durations;
   const std::vector<ArcSegment> refined = refine(encoder_pieces, durations_s, B, refined_durations);
+  if (refined.size() > kMaxSecondOrderPieces) {
+    throw std::length_error("predict_second_order: " + std::to_string(refined.size()) +
+                            " quadrature pieces, above kMaxSecondOrderPieces (limits.hpp)");
+  }
   const effects::ResolvedPath resolved = effects::resolve(refined, refined_durations, robot, effects);
   const std::size_t K = resolved.pieces.size();
   Model model;

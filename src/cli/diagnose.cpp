@@ -41,6 +41,7 @@ int run_diagnose(const DiagnoseOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
   check_order(opt.order);
+  check_second_order_size(suite, opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
   check_finite_start(suite, model, "diagnosis");

@@ -34,6 +34,7 @@ int run_fit(const FitOptions& opt) {
   }
   check_order(opt.order);
   const Suite suite = load_suite(opt.suite);
+  check_second_order_size(suite, opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
   check_finite_start(suite, model, "fit");
