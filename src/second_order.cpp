@@ -60,8 +60,12 @@
 // where it is smooth. Cost: (QK)^2/2 + K Q^2 pair evaluations.
 #include "odomcov/second_order.hpp"
 
+#include "odomcov/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
+#include <string>
+#include <stdexcept>
 #include <complex>
 
 #include "effects/effect.hpp"
@@ -117,15 +121,15 @@ void make_node(const Model& model, std::size_t k, double u, double weight, doubl
                Node& node) {
   const Piece& p = model.pieces[k];
   const int m = model.m;
-  const double* g0 = &model.g_start[k * static_cast<std::size_t>(m)];
-  const double* gt = &model.g_theta[k * static_cast<std::size_t>(m)];
+  const double* g0 = model.g_start.data() + k * static_cast<std::size_t>(m);
+  const double* gt = model.g_theta.data() + k * static_cast<std::size_t>(m);
   for (int i = 0; i < m; ++i) g_buffer[i] = g0[i] + gt[i] * u;
   node.A = std::polar(1.0, p.heading0 + p.a * u);
   node.d = p.d;
   node.W = p.w0 + p.i_tt * u;
   node.V = node.W + dot(g_buffer, g_buffer, m);
   node.i_td = p.i_td;
-  node.gd = &model.g_d[k * static_cast<std::size_t>(m)];
+  node.gd = model.g_d.data() + k * static_cast<std::size_t>(m);
   node.g = g_buffer;
   node.g_gd = dot(g_buffer, node.gd, m);
   node.m = 0.5 * p.i_td + node.g_gd;
@@ -210,12 +214,21 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
 
 }  // namespace
 
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
+  std::vector<double> unused;
+  return refine(pieces, {}, wheelbase_m, unused).size();
+}
+
 Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
                                 const std::vector<double>& durations_s, const Robot& robot,
                                 const EffectList& effects) {
   const double B = robot.wheelbase_m;
   std::vector<double> refined_durations;
   const std::vector<ArcSegment> refined = refine(encoder_pieces, durations_s, B, refined_durations);
+  if (refined.size() > kMaxSecondOrderPieces) {
+    throw std::length_error("predict_second_order: " + std::to_string(refined.size()) +
+                            " quadrature pieces, above kMaxSecondOrderPieces (limits.hpp)");
+  }
   const effects::ResolvedPath resolved = effects::resolve(refined, refined_durations, robot, effects);
   const std::size_t K = resolved.pieces.size();
   Model model;
@@ -254,7 +267,9 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
     odometry = drive(odometry, r.encoder, B);
   }
   model.w_end = w;
-  const double* g_end = &model.g_start[K * mm];
+  // data() + offset, not &v[i]: with no run constants (m = 0) the vectors are empty and v[0]
+  // would bind a reference to null (UBSan, found by the fuzz targets).
+  const double* g_end = model.g_start.data() + K * mm;
   const double v_end = w + dot(g_end, g_end, m);
 
   // Regular nodes: Q per piece.
@@ -265,7 +280,7 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
   for (std::size_t k = 0; k < K; ++k) {
     for (int q = 0; q < kQ; ++q) {
       const std::size_t n = k * kQ + static_cast<std::size_t>(q);
-      make_node(model, k, gl[q].first, gl[q].second, &g_nodes[n * mm], nodes[n]);
+      make_node(model, k, gl[q].first, gl[q].second, g_nodes.data() + n * mm, nodes[n]);
       const Node& x = nodes[n];
       // (2)
       noise_mean += x.weight * x.A *

@@ -42,6 +42,10 @@ Prediction predict_second_order(const std::vector<ArcSegment>& pieces,
                                 const std::vector<double>& durations_s, const Robot& robot,
                                 const EffectList& effects);
 
+/// The number of quadrature pieces predict_second_order cuts `pieces` into (before any
+/// effect's split); above kMaxSecondOrderPieces (limits.hpp) it throws std::length_error.
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m);
+
 /// Merges consecutive pieces (e.g. the per-sample pieces of a logged run) into pieces that turn
 /// at most kPieceMaxAngle and travel at most kPieceMaxTravel, never merging across a reversal
 /// of either wheel.

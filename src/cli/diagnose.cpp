@@ -53,6 +53,7 @@ int run_diagnose(const DiagnoseOptions& opt) {
     }
   }
   check_order(opt.order);
+  check_second_order_size(suite, opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
   check_finite_start(suite, model, "diagnosis");
