@@ -13,6 +13,7 @@
 #include <array>
 #include <cmath>
 #include <mutex>
+#include <utility>
 
 #include "effect.hpp"
 #include "odomcov/format.hpp"
@@ -175,12 +176,13 @@ EffectSpec define_custom_effect(CustomEffect def, const std::vector<double>& sta
   if (start.size() != def.parameters.size()) fail_at(where, "one starting value per parameter");
   def.info = EffectInfo{};
   def.info.name = def.name;
-  def.info.physics = "custom effect " + def.name;
-  def.info.signature = "a user-defined hypothesis";
-  def.info.summary = "custom:";
-  for (const auto* e : {&def.scale, &def.scale_left, &def.scale_right, &def.wheelbase_factor}) {
-    if (!e->text.empty()) def.info.summary += " " + e->key.substr(e->key.rfind('.') + 1) + " = " + e->text + ";";
+  for (const auto& [key, e] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
+                               std::pair{"scale_right", &def.scale_right},
+                               std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+    if (!e->text.empty()) def.info.summary += std::string(def.info.summary.empty() ? "" : ", ") + key + " = " + e->text;
   }
+  def.info.physics = "custom effect " + def.name + " (" + def.info.summary + ")";
+  def.info.signature = "a user-defined hypothesis";
   def.info.systematic = true;
   for (std::size_t i = 0; i < def.parameters.size(); ++i) {
     // Unbounded and signed: the fit works on the value itself, stepping by a hundredth of its
