@@ -121,6 +121,22 @@ TEST(CustomEffect, SpeedScaleIsFittedBack) {
   EXPECT_TRUE(compare(suite, r.model, 1e-3).verdict.consistent());
 }
 
+// A factor that depends on the history (the distance so far, s) is evaluated per sample by the
+// simulator and per model piece by the engine: both sides still agree (speed_scale.yaml's
+// path, 10 000 runs, alpha = 0.001, fixed seed), and the plain model is rejected.
+TEST(CustomEffect, DistanceDependentScaleAgreesOnBothSides) {
+  Config config = load_config(ODOMCOV_SOURCE_DIR "/configs/effects/speed_scale.yaml");
+  CustomEffect def;
+  def.name = "wear";
+  def.parameters = {"a"};
+  def.scale.text = "1 + a * min(s, 8)";
+  config.world.effects = config.model_effects = {define_custom_effect(def, {0.002})};
+  const Validation with = validate(config, 1e-3);
+  EXPECT_EQ(with.verdict, "consistent") << with.mean_test.p_value << " " << with.cov_test.p_value;
+  config.model_effects.clear();
+  EXPECT_EQ(validate(config, 1e-3).verdict, "inconsistent");
+}
+
 TEST(CustomEffect, DefinitionsRoundTripThroughTheWriters) {
   const auto dir = temp_dir("roundtrip");
   const EffectSpec spec = custom_tdw(1.0021, 1.013);

@@ -56,8 +56,10 @@ class Compiled {
     vars_[kR] = m.r;
     vars_[kDir] = m.dir;
     vars_[kTurn] = m.turn;
-    vars_[kS] = m.s_m;
-    vars_[kT] = m.t_s;
+    // s and t at the middle of the increment: a model piece (many samples long) then gets the
+    // mean of a linear dependence exactly, as the simulator's samples sum it.
+    vars_[kS] = m.s_m + 0.25 * (std::abs(m.dL_m) + std::abs(m.dR_m));
+    vars_[kT] = m.t_s + 0.5 * m.dt_s;
     return parser_.Eval();
   }
 
@@ -115,8 +117,9 @@ class Custom final : public effects::Effect {
     fail_at(expression(i), "evaluates to " + format_number(x) + " (" + what + ") at v = " +
                                format_number(m.v_mps) + ", kappa = " + format_number(m.kappa_per_m) +
                                ", r = " + format_number(m.r) + ", dir = " + std::to_string(m.dir) +
-                               ", turn = " + std::to_string(m.turn) + ", s = " + format_number(m.s_m) +
-                               ", t = " + format_number(m.t_s) +
+                               ", turn = " + std::to_string(m.turn) + ", s = " +
+                               format_number(m.s_m + 0.25 * (std::abs(m.dL_m) + std::abs(m.dR_m))) +
+                               ", t = " + format_number(m.t_s + 0.5 * m.dt_s) +
                                (std::isnan(m.t_s) ? " (the path has no times here)" : ""));
   }
 
