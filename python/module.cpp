@@ -16,6 +16,7 @@
 #include "odomcov/statistics.hpp"
 #include "odomcov/suite.hpp"
 #include "odomcov/validation.hpp"
+#include "failures.hpp"  // src/cli: the failures in words
 
 namespace py = pybind11;
 using namespace odomcov;
@@ -226,7 +227,7 @@ py::dict compare_py(const Suite& suite, double alpha) {
   out["kurtosis"] = test_dict(c.kurtosis);
   out["log_likelihood"] = c.log_likelihood;
   out["verdict"] = c.verdict.name();
-  out["failures"] = c.failures;
+  out["failures"] = cli::failure_texts(c);
   return out;
 }
 

@@ -341,17 +341,6 @@ std::vector<const SuiteExperiment*> experiments_named(const Suite& suite, const 
   return out;
 }
 
-/// Encoder travel of every run, as constant-curvature pieces (the samples of a path).
-std::vector<ArcSegment> encoder_pieces(const SuiteExperiment& ex, const SuiteRun& run) {
-  if (ex.logged) return run.pieces;
-  std::vector<ArcSegment> pieces;
-  for (const SampleRun& s : sample_schedule(ex.path)) {
-    const double n = static_cast<double>(s.count);
-    pieces.push_back({n * s.increment.left_m, n * s.increment.right_m});
-  }
-  return pieces;
-}
-
 struct SquareRuns {
   std::vector<Vector3> measured;
   std::vector<std::vector<ArcSegment>> pieces;

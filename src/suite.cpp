@@ -19,17 +19,17 @@ Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double
   return pose;
 }
 
+std::vector<ArcSegment> encoder_pieces(const SuiteExperiment& ex, const SuiteRun& run) {
+  return ex.logged ? run.pieces : sample_arcs(ex.path);
+}
+
 Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m) {
   return pose_error(run.measured, odometry_end_pose(ex, run, wheelbase_m));
 }
 
 Vector3 sampled_end_pose(const Path& path, double wheelbase_m) {
   Vector3 pose = Vector3::Zero();
-  for (const SampleRun& run : sample_schedule(path)) {
-    const double n = static_cast<double>(run.count);
-    // `count` samples of one increment lie on one arc: drive it in one step.
-    pose = drive(pose, {n * run.increment.left_m, n * run.increment.right_m}, wheelbase_m);
-  }
+  for (const ArcSegment& arc : sample_arcs(path)) pose = drive(pose, arc, wheelbase_m);
   return pose;
 }
 

@@ -70,6 +70,10 @@ std::string model_yaml(const SuiteModel& model);
 /// by piece, or the experiment's sampled path.
 Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
+/// A run's encoder travel as constant-curvature pieces: the logged pieces, or the sampled
+/// path's arcs (sample_arcs).
+std::vector<ArcSegment> encoder_pieces(const SuiteExperiment& ex, const SuiteRun& run);
+
 /// The error as docs/conventions.md defines it at `wheelbase_m`: measured (true) - odometry, theta wrapped.
 Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 

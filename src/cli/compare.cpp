@@ -5,6 +5,7 @@
 
 #include "commands.hpp"
 #include "odomcov/comparison.hpp"
+#include "failures.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {
@@ -59,7 +60,7 @@ std::string comparison_text(const Suite& suite, const Comparison& c) {
       << "\nverdict: " << c.verdict << "\n";
   if (!c.failures.empty()) {
     out << "Where it fails (worst first):\n";
-    for (const std::string& f : c.failures) out << "  - " << f << "\n";
+    for (const std::string& f : failure_texts(c)) out << "  - " << f << "\n";
   }
   return out.str();
 }
@@ -93,7 +94,7 @@ json comparison_json(const Suite& suite, const Comparison& c) {
           {"kurtosis", kurtosis},
           {"log_likelihood", c.log_likelihood},
           {"verdict", c.verdict.name()},
-          {"failures", c.failures}};
+          {"failures", failure_texts(c)}};
 }
 
 namespace {

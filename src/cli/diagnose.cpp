@@ -57,6 +57,7 @@ int run_diagnose(const DiagnoseOptions& opt) {
   check_order(opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
+  check_finite_start(suite, model, "diagnosis");
   DiagnoseProgress progress;
   ProgressBar bar([&progress] { return progress.fits_done.load(); },
                   std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),

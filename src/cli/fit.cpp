@@ -37,14 +37,7 @@ int run_fit(const FitOptions& opt) {
   }
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
-  // A start whose likelihood is not finite (no wheel noise and no measurement noise: a singular
-  // predicted covariance) gives the optimiser nothing to climb: refuse it plainly.
-  if (!std::isfinite(log_likelihood(residuals(suite, model)))) {
-    throw InputError(suite.file, 0, "robot",
-                     "the suite's model gives a log-likelihood of -inf (a singular predicted "
-                     "covariance: k_left = k_right = 0 and no measurement_noise?); give it some "
-                     "noise to start the fit from");
-  }
+  check_finite_start(suite, model, "fit");
   std::atomic<std::int64_t> evaluations{0};
   ProgressBar bar([&evaluations] { return evaluations.load(); },
                   std::function<std::int64_t()>([] { return std::int64_t{0}; }),

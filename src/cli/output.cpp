@@ -2,7 +2,9 @@
 
 #include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -10,6 +12,7 @@
 #include <vector>
 
 #include "odomcov/error.hpp"
+#include "odomcov/likelihood.hpp"
 
 namespace odomcov::cli {
 
@@ -107,6 +110,14 @@ void check_order(int order) {
   if (order != 1 && order != 2) throw UsageError("--order must be 1 or 2");
 }
 
+void check_finite_start(const Suite& suite, const SuiteModel& model, const std::string& what) {
+  if (std::isfinite(log_likelihood(residuals(suite, model)))) return;
+  throw InputError(suite.file, 0, "robot",
+                   "the suite's model gives a log-likelihood of -inf (a singular predicted "
+                   "covariance: k_left = k_right = 0 and no measurement_noise?); give it some "
+                   "noise to start the " + what + " from");
+}
+
 void check_threads(int threads) {
   if (threads < 0 || threads > kMaxThreads) {
     throw UsageError("--threads must be in [0, " + std::to_string(kMaxThreads) + "] (0 = all cores)");
@@ -181,10 +192,16 @@ void StagedDir::write(const std::string& relative, const std::string& text) {
   const fs::path path = fs::path(tmp_) / relative;
   std::error_code ec;
   fs::create_directories(path.parent_path(), ec);
+  errno = 0;
   std::ofstream file(path, std::ios::binary | std::ios::trunc);
   file << text;
   file.flush();
-  if (ec || !file) throw UsageError("--out: cannot write " + one_line(path.string(), 200));
+  if (ec || !file) {
+    // Named by where it was going (the staging directory is removed), with the system's reason.
+    const std::string why = ec ? ec.message() : errno != 0 ? std::strerror(errno) : "write failed";
+    throw UsageError("--out: cannot write " + one_line((fs::path(out_) / relative).string(), 200) +
+                     " (" + why + "); nothing was written");
+  }
 }
 
 void StagedDir::commit() {
