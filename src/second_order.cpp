@@ -117,15 +117,15 @@ void make_node(const Model& model, std::size_t k, double u, double weight, doubl
                Node& node) {
   const Piece& p = model.pieces[k];
   const int m = model.m;
-  const double* g0 = &model.g_start[k * static_cast<std::size_t>(m)];
-  const double* gt = &model.g_theta[k * static_cast<std::size_t>(m)];
+  const double* g0 = model.g_start.data() + k * static_cast<std::size_t>(m);
+  const double* gt = model.g_theta.data() + k * static_cast<std::size_t>(m);
   for (int i = 0; i < m; ++i) g_buffer[i] = g0[i] + gt[i] * u;
   node.A = std::polar(1.0, p.heading0 + p.a * u);
   node.d = p.d;
   node.W = p.w0 + p.i_tt * u;
   node.V = node.W + dot(g_buffer, g_buffer, m);
   node.i_td = p.i_td;
-  node.gd = &model.g_d[k * static_cast<std::size_t>(m)];
+  node.gd = model.g_d.data() + k * static_cast<std::size_t>(m);
   node.g = g_buffer;
   node.g_gd = dot(g_buffer, node.gd, m);
   node.m = 0.5 * p.i_td + node.g_gd;
@@ -255,7 +255,7 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
     odometry = drive(odometry, r.encoder, B);
   }
   model.w_end = w;
-  const double* g_end = &model.g_start[K * mm];
+  const double* g_end = model.g_start.data() + K * mm;  // no run constants: empty, not indexed
   const double v_end = w + dot(g_end, g_end, m);
 
   // Regular nodes: Q per piece.
