@@ -227,8 +227,14 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
       [](const std::vector<double>& x, std::vector<double>&, void* data) {
         auto* c = static_cast<Context*>(data);
         ++c->evaluations;
-        return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data(), c->kind,
-                                       c->counter);
+        // No exception may cross NLopt. A custom effect's expression that is not finite at a
+        // trial point is a wall for the optimiser; at the start it was an InputError already.
+        try {
+          return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data(), c->kind,
+                                         c->counter);
+        } catch (const InputError&) {
+          return 1e300;
+        }
       },
       &context);
   double best = 0.0;

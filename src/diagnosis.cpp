@@ -261,6 +261,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   // The user's own candidates (custom, or catalogue ones with their starting values) join the
   // list; each enters the fit from its given start.
   for (const EffectSpec& c : candidates) {
+    if (c.values.empty()) continue;  // nothing to fit (the CLI refuses such a candidate)
     if (!find_spec(model.effects, c.name) && std::find(names.begin(), names.end(), c.name) == names.end()) {
       names.push_back(c.name);
     }

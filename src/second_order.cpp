@@ -176,6 +176,7 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
                                const std::vector<double>& durations_s, double wheelbase_m,
                                std::vector<double>& refined_durations_s) {
   // Durations (when given) follow the pieces: summed where pieces merge, split where they are cut.
+  // Pieces merge only at equal durations too, so a piece keeps its speed (a custom effect's v).
   const bool timed = !durations_s.empty();
   std::vector<ArcSegment> merged;
   std::vector<double> merged_durations;
@@ -183,7 +184,7 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
   for (std::size_t i = 0; i < pieces.size();) {
     std::size_t j = i + 1;
     while (j < pieces.size() && pieces[j].left_m == pieces[i].left_m &&
-           pieces[j].right_m == pieces[i].right_m) {
+           pieces[j].right_m == pieces[i].right_m && (!timed || durations_s[j] == durations_s[i])) {
       ++j;
     }
     const double count = static_cast<double>(j - i);
@@ -339,25 +340,39 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
 }
 
 std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
+  return coarsen_pieces(pieces, wheelbase_m, {}, nullptr);
+}
+
+std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m,
+                                       const std::vector<double>& durations_s,
+                                       std::vector<double>* coarse_durations_s) {
+  const bool timed = !durations_s.empty() && coarse_durations_s;
+  if (coarse_durations_s) coarse_durations_s->clear();
   std::vector<ArcSegment> out;
+  double span = 0.0;
   auto same_sense = [](double x, double y) { return x == 0.0 || y == 0.0 || (x > 0) == (y > 0); };
   ArcSegment current;
   bool open = false;
-  for (const ArcSegment& p : pieces) {
+  for (std::size_t i = 0; i < pieces.size(); ++i) {
+    const ArcSegment& p = pieces[i];
     if (open) {
       const ArcSegment merged{current.left_m + p.left_m, current.right_m + p.right_m};
       if (same_sense(current.left_m, p.left_m) && same_sense(current.right_m, p.right_m) &&
           std::abs(merged.heading_change_rad(wheelbase_m)) <= kPieceMaxAngle &&
           std::abs(merged.center_m()) <= kPieceMaxTravel) {
         current = merged;
+        if (timed) span += durations_s[i];
         continue;
       }
       out.push_back(current);
+      if (timed) coarse_durations_s->push_back(span);
     }
     current = p;
+    if (timed) span = durations_s[i];
     open = true;
   }
   if (open) out.push_back(current);
+  if (open && timed) coarse_durations_s->push_back(span);
   return out;
 }
 
@@ -370,13 +385,16 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
                               const EffectList& effects, int order) {
   if (order == 1) return predict(pieces, durations_s, robot, effects);
-  const std::vector<ArcSegment> coarse = coarsen_pieces(pieces, robot.wheelbase_m);
+  std::vector<double> coarse_durations;
+  const std::vector<ArcSegment> coarse =
+      coarsen_pieces(pieces, robot.wheelbase_m, durations_s, &coarse_durations);
   if (coarse.size() == pieces.size()) return predict_second_order(pieces, durations_s, robot, effects);
   // Fine pieces (a logged run): the first order on them, with every piece's duration, and only
-  // the order-2 correction (second minus first order, both untimed) on the coarsened pieces.
+  // the order-2 correction (second minus first order) on the coarsened pieces, timed when the
+  // pieces are (an effect may depend on the speed).
   Prediction out = predict(pieces, durations_s, robot, effects);
-  const Prediction coarse2 = predict_second_order(coarse, robot, effects);
-  const Prediction coarse1 = predict(coarse, robot, effects);
+  const Prediction coarse2 = predict_second_order(coarse, coarse_durations, robot, effects);
+  const Prediction coarse1 = predict(coarse, coarse_durations, robot, effects);
   out.noise_mean += coarse2.mean + coarse2.noise_mean - coarse1.mean - coarse1.noise_mean;
   out.cov += coarse2.cov - coarse1.cov;
   return out;

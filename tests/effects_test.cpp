@@ -68,6 +68,9 @@ std::vector<std::string> catalogue_names() {
 
 INSTANTIATE_TEST_SUITE_P(Catalogue, EffectConfig, ::testing::ValuesIn(catalogue_names()),
                          [](const auto& info) { return info.param; });
+// A custom effect (configs/effects/speed_scale.yaml): the same two-sided check.
+INSTANTIATE_TEST_SUITE_P(Custom, EffectConfig, ::testing::Values("speed_scale"),
+                         [](const auto& info) { return info.param; });
 
 TEST(Effects, CatalogueMatchesSpec) {
   std::vector<std::string> names;

@@ -84,6 +84,9 @@ struct CustomEffect {
   /// The description fit and diagnose use: parameters unbounded and signed (identity fit
   /// transform), neutral at the starting value; systematic.
   EffectInfo info;
+  /// What the expressions depend on, set by define_custom_effect: 0 nothing, 1 the increment
+  /// (v, kappa, r, dir, turn), 2 the history (s, t).
+  int dependence = 0;
 
   bool operator==(const CustomEffect& other) const;
 };

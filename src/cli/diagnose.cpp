@@ -46,10 +46,14 @@ int run_diagnose(const DiagnoseOptions& opt) {
   const Suite suite = load_suite(opt.suite);
   const EffectList own = opt.candidates.empty() ? EffectList{} : load_effects(opt.candidates);
   for (std::size_t i = 0; i < own.size(); ++i) {
+    const int line = own[i].custom ? own[i].custom->line : 0;
     if (find_spec(suite.model_effects, own[i].name)) {
-      const int line = own[i].custom ? own[i].custom->line : 0;
       throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
                        "name clash: " + quote(own[i].name) + " is already in the suite's model");
+    }
+    if (own[i].values.empty()) {
+      throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
+                       "a candidate needs a parameter to fit (custom: parameters: {name: start})");
     }
   }
   check_order(opt.order);
