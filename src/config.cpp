@@ -128,6 +128,18 @@ EffectSpec parse_custom(const Where& where, const YAML::Node& node) {
   return define_custom_effect(std::move(def), start);
 }
 
+/// A group_variation must vary a systematic parameter of another effect of its list: else bad
+/// input at its `parameter` line.
+void check_group_target_at(const Where& where, const YAML::Node& node, const EffectList& list) {
+  const std::string error = check_group_target(list);
+  if (error.empty()) return;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    if (list[i].name != kGroupVariation) continue;
+    yaml::fail(where.index(i).child(kGroupVariation).child("parameter"),
+               node[i].begin()->second["parameter"], error);
+  }
+}
+
 }  // namespace
 
 EffectList parse_effects(const YAML::Node& node, const std::string& file, const std::string& key) {
@@ -183,13 +195,7 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     list.push_back(std::move(spec));
   }
   if (list.size() > kMaxEffects) yaml::fail(where, node, "at most " + std::to_string(kMaxEffects) + " effects");
-  if (const std::string error = check_group_target(list); !error.empty()) {
-    for (std::size_t i = 0; i < list.size(); ++i) {
-      if (list[i].name != kGroupVariation) continue;
-      const Where gw = where.index(i).child(kGroupVariation).child("parameter");
-      yaml::fail(gw, node[i].begin()->second["parameter"], error);
-    }
-  }
+  check_group_target_at(where, node, list);
   return list;
 }
 
