@@ -203,8 +203,20 @@ def summarise(report):
             "by_type": by_type(c["experiments"])}
 
 
+def _candidates(d):
+    """Every candidate of a diagnose round in brief, best first."""
+    return [{k: c.get(k) for k in ("effect", "parameters", "stderr", "delta_log_likelihood",
+                                   "likelihood", "p_value")} for c in d["candidates"]]
+
+
 def _round_of(round_, d):
     """One round's entry of the report from its diagnose JSON."""
+    entry = _round_fields(round_, d)
+    entry["candidates"] = _candidates(d)
+    return entry
+
+
+def _round_fields(round_, d):
     if d["best"] is None:
         return {"round": round_, "named": None, "before": d["before"], "explained": d.get("explained")}
     best = d["best"]["effect"]
@@ -258,6 +270,10 @@ def resummarise(report, out):
     for s in report["rounds"]:
         if s["named"]:
             s["compare"] = again(f"compare-round-{s['round'] + 1}.json")
+        path = os.path.join(out, f"diagnose-{s['round']}.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                s["candidates"] = _candidates(json.load(f))
     held = report.get("holdout")
     if held:
         for key in ("compare_after", "compare_fit"):
