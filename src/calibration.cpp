@@ -184,7 +184,13 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
     const std::size_t dot = name.find('.');
     if (dot == std::string::npos) continue;
     const std::string effect = name.substr(0, dot);
-    if (!find_spec(model.effects, effect)) {
+    const bool present = find_spec(model.effects, effect) != nullptr;
+    if (!present && find_effect(effect)->grouped) {
+      throw EffectError("--params", name + ": add " + effect +
+                                        " with the parameter it varies to the model first, e.g. "
+                                        "- group_variation: {parameter: wheelbase_error.Eb, sd: 0}");
+    }
+    if (!present) {
       EffectSpec spec{effect, {}};
       for (const EffectParameterInfo& p : find_effect(effect)->parameters) spec.values.push_back(p.typical);
       model.effects.push_back(spec);
@@ -221,8 +227,14 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
       [](const std::vector<double>& x, std::vector<double>&, void* data) {
         auto* c = static_cast<Context*>(data);
         ++c->evaluations;
-        return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data(), c->kind,
-                                       c->counter);
+        // No exception may cross NLopt. A custom effect's expression that is not finite at a
+        // trial point is a wall for the optimiser; at the start it was an InputError already.
+        try {
+          return negative_log_likelihood(*c->suite, *c->model, *c->handles, x.data(), c->kind,
+                                         c->counter);
+        } catch (const InputError&) {
+          return 1e300;
+        }
       },
       &context);
   double best = 0.0;

@@ -30,8 +30,26 @@ double chi2_two_sided(double x, double dof) {
   return std::min(1.0, 2.0 * std::min(lower, 1.0 - lower));
 }
 
+/// The predicted mean and covariance of a run drawn from the experiment (a mixture over its
+/// runs), each run on its own (`own`: the between-group spread included).
+void predicted_block(const std::vector<RunResidual>& own, ExperimentComparison& c) {
+  const double n = static_cast<double>(own.size());
+  Matrix3 mean_cov = Matrix3::Zero();
+  MomentAccumulator means;
+  for (const RunResidual& r : own) {
+    mean_cov += r.cov / n;
+    means.add(r.mean);
+  }
+  c.predicted_mean = means.mean();
+  c.predicted_cov = mean_cov + means.scatter() / n;
+}
+
+/// `res` are the runs' predictions given the earlier runs of their groups
+/// (condition_on_groups), so whitening each run by its own covariance whitens the groups
+/// jointly; `own` are the runs' predictions on their own (marginal), for the predicted block.
 ExperimentComparison compare_experiment(const SuiteExperiment& ex,
-                                        const std::vector<RunResidual>& res, double alpha_test,
+                                        const std::vector<RunResidual>& res,
+                                        const std::vector<RunResidual>& own, double alpha_test,
                                         std::vector<Vector3>& whitened) {
   ExperimentComparison c;
   c.name = ex.name;
@@ -40,7 +58,6 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
   std::vector<Vector3> errors, raw;
   whitened.clear();
   Matrix3 mean_cov = Matrix3::Zero();
-  MomentAccumulator predicted_means;
   // A prediction that cannot whiten (singular or non-finite covariance, e.g. no wheel noise and
   // no measurement noise) leaves the experiment untestable, with no statistic computed from it.
   for (const RunResidual& r : res) {
@@ -68,12 +85,10 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
     c.outside_95 += (nees > kChi2_3_95 ? 1.0 : 0.0) / n;
     c.log_likelihood += gaussian_log_density(r.error, r.mean, r.cov);
     mean_cov += r.cov / n;
-    predicted_means.add(r.mean);
   }
   c.measured = moments(errors);
   c.errors = std::move(errors);
-  c.predicted_mean = predicted_means.mean();
-  c.predicted_cov = mean_cov + predicted_means.scatter() / n;
+  predicted_block(own, c);
 
   const SampleMoments z = moments(whitened);
   c.mean_test = c.n > kDim ? hotelling_test(z, Vector3::Zero())
@@ -158,7 +173,9 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
   Comparison out;
   out.alpha = alpha;
   out.alpha_per_test = alpha / static_cast<double>(2 * suite.experiments.size() + 1);
-  const auto res = residuals(suite, model);
+  const auto grouped = residuals(suite, model);
+  const auto res = condition_on_groups(grouped);
+  const auto own = marginal(grouped);
   // Mardia's multivariate kurtosis [Mardia70] as a test of shape only: each experiment's
   // whitened residuals are standardised by that experiment's own mean and covariance (so scale
   // and mean misfits, which differ between experiments, do not read as tails), and the
@@ -172,7 +189,7 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     std::vector<Vector3> z;
     out.experiments.push_back(
-        compare_experiment(suite.experiments[e], res[e], out.alpha_per_test, z));
+        compare_experiment(suite.experiments[e], res[e], own[e], out.alpha_per_test, z));
     out.log_likelihood += out.experiments.back().log_likelihood;
     const double n = static_cast<double>(z.size());
     if (z.size() < static_cast<std::size_t>(kMinRunsForLrt)) continue;

@@ -156,10 +156,14 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     }
     const YAML::Node params = item.begin()->second;
     if (!params.IsMap()) yaml::fail(effect_where, params, "expected a map of parameters");
-    EffectSpec spec{name, {}};
+    EffectSpec spec{name, {}, {}};
+    if (info->grouped) {  // group_variation: {parameter: <effect>.<parameter>, sd: ...}
+      spec.target = yaml::to_string(effect_where.child("parameter"),
+                                    yaml::require(effect_where, params, "parameter"));
+    }
     for (const auto& entry : params) {
       const std::string p = entry.first.Scalar();
-      bool known = false;
+      bool known = info->grouped && p == "parameter";
       for (const EffectParameterInfo& info_p : info->parameters) known = known || info_p.name == p;
       if (!known) yaml::fail(effect_where.child(p), entry.first, "unknown parameter");
     }
@@ -179,6 +183,13 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     list.push_back(std::move(spec));
   }
   if (list.size() > kMaxEffects) yaml::fail(where, node, "at most " + std::to_string(kMaxEffects) + " effects");
+  if (const std::string error = check_group_target(list); !error.empty()) {
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      if (list[i].name != kGroupVariation) continue;
+      const Where gw = where.index(i).child(kGroupVariation).child("parameter");
+      yaml::fail(gw, node[i].begin()->second["parameter"], error);
+    }
+  }
   return list;
 }
 

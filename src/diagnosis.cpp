@@ -37,16 +37,37 @@ std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<Run
   return out;
 }
 
+/// A group_variation candidate's varied parameter: "wheelbase_error.Eb" of
+/// "group_variation(wheelbase_error.Eb)"; "" for any other candidate.
+std::string group_candidate_target(const std::string& candidate) {
+  const std::string prefix = std::string(kGroupVariation) + "(";
+  if (candidate.rfind(prefix, 0) != 0 || candidate.back() != ')') return "";
+  return candidate.substr(prefix.size(), candidate.size() - prefix.size() - 1);
+}
+
+/// The catalogue effect of a candidate: its name, or group_variation for group_variation(...).
+std::string candidate_effect(const std::string& candidate) {
+  return group_candidate_target(candidate).empty() ? candidate : kGroupVariation;
+}
+
 /// Systematic candidates move the mean and are judged on the full likelihood; the others only
 /// add randomness and are judged on the scatter part, which a mean misfit cannot inflate.
 bool systematic(const std::string& effect, const EffectList& context) {
-  return effect != kWheelNoiseLevel && find_effect(effect, context)->systematic;
+  return effect != kWheelNoiseLevel && find_effect(candidate_effect(effect), context)->systematic;
 }
 
 /// The parameters a candidate fits. bumps: only the rate; a Gaussian likelihood sees rate and
 /// sigma only through rate sigma^2, so sigma stays at its typical size there (see bumps_sigma).
+/// group_variation(E.p): its sd, and E.p too when E is not in the model yet (it joins at its
+/// neutral value).
 std::vector<std::string> fitted_names(const std::string& effect, const EffectList& context) {
   if (effect == kWheelNoiseLevel) return {"k_left", "k_right"};
+  if (const std::string target = group_candidate_target(effect); !target.empty()) {
+    std::vector<std::string> names;
+    if (!find_spec(context, target.substr(0, target.find('.')))) names.push_back(target);
+    names.push_back(std::string(kGroupVariation) + ".sd");
+    return names;
+  }
   if (effect == "bumps") return {"bumps.rate"};
   std::vector<std::string> names;
   for (const EffectParameterInfo& p : find_effect(effect, context)->parameters) names.push_back(effect + "." + p.name);
@@ -84,12 +105,73 @@ SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* 
 /// True when every fitted parameter's "no effect" value is the edge of its range (a size that
 /// cannot be negative): the likelihood-ratio statistic is then a 50:50 mixture of chi^2_0 and
 /// chi^2_dof [Self87], so the p-value is half the chi^2 one.
-bool on_boundary(const std::string& effect, const EffectList& context) {
+bool on_boundary(const std::string& effect, const std::vector<std::string>& own,
+                 const EffectList& context) {
   if (effect == kWheelNoiseLevel) return false;
-  for (const EffectParameterInfo& p : find_effect(effect, context)->parameters) {
-    if (!(p.neutral == p.lower && !p.open_lower)) return false;
+  for (const std::string& name : own) {
+    const std::size_t dot = name.find('.');
+    for (const EffectParameterInfo& p : find_effect(name.substr(0, dot), context)->parameters) {
+      if (p.name == name.substr(dot + 1) && !(p.neutral == p.lower && !p.open_lower)) return false;
+    }
   }
   return true;
+}
+
+/// The group_variation candidates: one per systematic parameter of the model's effects, and
+/// wheelbase_error.Eb and wheel_diameter_ratio.Ed (the sizes a day's tyre pressure or load
+/// change) when the model does not have them. Only for suites that give groups, and when the
+/// model has no group_variation yet.
+std::vector<std::string> group_candidates(const Suite& suite, const EffectList& model) {
+  bool grouped = false;
+  for (const SuiteExperiment& ex : suite.experiments) grouped = grouped || !ex.group.empty();
+  if (!grouped || find_spec(model, kGroupVariation)) return {};
+  std::vector<std::string> targets;
+  for (const EffectSpec& e : model) {
+    const EffectInfo* info = info_of(e);
+    if (!info->systematic || info->grouped) continue;
+    for (const EffectParameterInfo& p : info->parameters) targets.push_back(e.name + "." + p.name);
+  }
+  for (const char* t : {"wheelbase_error.Eb", "wheel_diameter_ratio.Ed"}) {
+    if (std::find(targets.begin(), targets.end(), t) == targets.end()) targets.push_back(t);
+  }
+  std::vector<std::string> out;
+  for (const std::string& t : targets) out.push_back(std::string(kGroupVariation) + "(" + t + ")");
+  return out;
+}
+
+/// A candidate's values in its (refitted) model, in the order of its parameters: the effect's
+/// values (bumps: sigma stays, rate refitted), or a group candidate's fitted names.
+std::vector<double> refitted_values(const Candidate& c, const EffectList& model) {
+  std::vector<double> values;
+  if (group_candidate_target(c.effect).empty()) {
+    for (const EffectSpec& e : c.model.effects) values = e.name == c.effect ? e.values : values;
+    return values;
+  }
+  for (const std::string& n : fitted_names(c.effect, model)) {
+    const std::size_t dot = n.find('.');
+    for (const EffectSpec& e : c.model.effects) {
+      const auto& ps = info_of(e)->parameters;
+      for (std::size_t i = 0; e.name == n.substr(0, dot) && i < ps.size(); ++i) {
+        if (ps[i].name == n.substr(dot + 1)) values.push_back(e.values[i]);
+      }
+    }
+  }
+  return values;
+}
+
+/// The model a group_variation candidate starts from: the varied effect (at its neutral value,
+/// when new) and group_variation at its typical sd.
+SuiteModel with_group_candidate(const SuiteModel& base, const std::string& candidate) {
+  SuiteModel m = base;
+  const std::string target = group_candidate_target(candidate);
+  const std::string effect = target.substr(0, target.find('.'));
+  if (!find_spec(m.effects, effect)) {
+    EffectSpec spec{effect, {}};
+    for (const EffectParameterInfo& p : find_effect(effect)->parameters) spec.values.push_back(p.neutral);
+    m.effects.push_back(spec);
+  }
+  m.effects.push_back({kGroupVariation, {find_effect(kGroupVariation)->parameters[0].typical}, target});
+  return m;
 }
 
 /// Sample excess kurtosis, bias-corrected (G2 of Joanes & Gill 1998).
@@ -163,19 +245,23 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
 
   std::vector<std::string> names;
   for (const EffectInfo& info : effect_catalogue()) {
-    if (!find_spec(model.effects, info.name)) names.push_back(info.name);
+    if (!find_spec(model.effects, info.name) && !info.grouped) names.push_back(info.name);
   }
+  for (const std::string& g : group_candidates(suite, model.effects)) names.push_back(g);
   names.push_back(kWheelNoiseLevel);
   if (!only.empty()) {
     std::vector<std::string> kept;
     for (const std::string& n : names) {
-      if (std::find(only.begin(), only.end(), n) != only.end()) kept.push_back(n);
+      const bool named = std::find(only.begin(), only.end(), n) != only.end() ||
+                         std::find(only.begin(), only.end(), candidate_effect(n)) != only.end();
+      if (named) kept.push_back(n);
     }
     names = kept;
   }
   // The user's own candidates (custom, or catalogue ones with their starting values) join the
   // list; each enters the fit from its given start.
   for (const EffectSpec& c : candidates) {
+    if (c.values.empty()) continue;  // nothing to fit (the CLI refuses such a candidate)
     if (!find_spec(model.effects, c.name) && std::find(names.begin(), names.end(), c.name) == names.end()) {
       names.push_back(c.name);
     }
@@ -194,6 +280,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     const std::vector<std::string> own = fitted_names(name, start.effects);
     fitted.insert(fitted.end(), own.begin(), own.end());
     const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
+    if (!group_candidate_target(name).empty()) start = with_group_candidate(base, name);
     const FitResult f = fit(suite, start, fitted, kind, progress ? &progress->evaluations : nullptr);
     // With heavy tails the observed information understates the uncertainty: sandwich SEs.
     const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
@@ -211,7 +298,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       lr /= before.mardia_b2 / before.mardia_expected;
     }
     lr = std::max(0.0, lr);
-    c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name, start.effects) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
+    c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name, own, start.effects) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
     const auto offset = static_cast<Eigen::Index>(fitted.size() - own.size());
     if (name == kWheelNoiseLevel) {
       c.parameters = {"k_left", "k_right"};
@@ -236,8 +323,11 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
                                      : "sigma undetermined (no straight line with heavy tails), "
                                        "kept at " + format_number(s, "%.3g") + " m");
     } else {
+      // Named within the effect ("Eb"); a group candidate's new varied parameter keeps its
+      // effect ("wheelbase_error.Eb" beside "sd").
+      const std::string prefix = candidate_effect(name) + ".";
       for (std::size_t i = 0; i < own.size(); ++i) {
-        c.parameters.push_back(own[i].substr(name.size() + 1));
+        c.parameters.push_back(own[i].rfind(prefix, 0) == 0 ? own[i].substr(prefix.size()) : own[i]);
         c.values.push_back(f.values(offset + static_cast<Eigen::Index>(i)));
         c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
       }
@@ -288,7 +378,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     if (best.effect == kWheelNoiseLevel) {
       best.values = {best.model.robot.noise.k_left, best.model.robot.noise.k_right};
     } else {
-      best.values = find_spec(best.model.effects, best.effect)->values;  // bumps: sigma stays, rate refitted
+      best.values = refitted_values(best, model.effects);
     }
   }
   if (progress) progress->fits_done = progress->fits_total.load();
@@ -309,8 +399,9 @@ std::string explain(const Candidate& c) {
     text = "wheel noise at another level than the model's: ";
     signature = "variance off in every experiment, growing with distance as wheel noise does";
   } else {
-    const EffectInfo* info = find_effect(c.effect, c.model.effects);
-    text = info->physics + ": ";
+    const EffectInfo* info = find_effect(candidate_effect(c.effect), c.model.effects);
+    const std::string target = group_candidate_target(c.effect);
+    text = info->physics + (target.empty() ? "" : ", varying " + target) + ": ";
     signature = info->signature;
   }
   for (std::size_t i = 0; i < c.parameters.size(); ++i) {
@@ -367,8 +458,19 @@ std::string candidate_yaml(const Candidate& c, const SuiteModel& model) {
     robot.noise.k_right = c.values[1];
     return robot_yaml(robot);
   }
-  const EffectSpec* e = find_spec(c.model.effects, c.effect);
-  return e ? effect_yaml(*e) : "";
+  // A group candidate: group_variation, after the effect it varies when that is new (so the
+  // lines pasted under model.effects never repeat an effect the suite has).
+  std::string text;
+  const std::string target = group_candidate_target(c.effect);
+  for (const EffectSpec& e : c.model.effects) {
+    const bool varied_and_new = !target.empty() && e.name == target.substr(0, target.find('.')) &&
+                                !find_spec(model.effects, e.name);
+    if (varied_and_new) text += effect_yaml(e) + "\n";
+  }
+  for (const EffectSpec& e : c.model.effects) {
+    if (e.name == candidate_effect(c.effect)) return text + effect_yaml(e);
+  }
+  return "";
 }
 
 }  // namespace odomcov

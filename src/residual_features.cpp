@@ -200,7 +200,7 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
   return acc.result();
 }
 
-std::string experiment_group(const SuiteExperiment& ex) { return ex.name; }
+std::string experiment_group(const SuiteExperiment& ex) { return group_key(ex); }
 
 const std::vector<std::string>& residual_feature_names() {
   static const std::vector<std::string> names = {"distance",         "angle_turned", "turn_direction",

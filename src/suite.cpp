@@ -12,6 +12,10 @@ Matrix3 MeasurementNoise::covariance() const {
   return Vector3(xy_m * xy_m, xy_m * xy_m, theta_rad * theta_rad).asDiagonal();
 }
 
+std::string group_key(const SuiteExperiment& ex) {
+  return ex.group.empty() ? "experiment:" + ex.name : "group:" + ex.group;
+}
+
 Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m) {
   if (!ex.logged) return sampled_end_pose(ex.path, wheelbase_m);
   Vector3 pose = Vector3::Zero();

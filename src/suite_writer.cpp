@@ -22,6 +22,7 @@ void emit_effects(YAML::Emitter& out, const EffectList& effects) {
     out << YAML::BeginMap << YAML::Key << (e.custom ? "custom" : e.name) << YAML::Value << YAML::Flow
         << YAML::BeginMap;
     if (e.custom) out << YAML::Key << "name" << YAML::Value << e.name << YAML::Key << "parameters" << YAML::Value << YAML::BeginMap;
+    if (!e.target.empty()) out << YAML::Key << "parameter" << YAML::Value << e.target;
     for (std::size_t i = 0; i < e.values.size(); ++i) {
       out << YAML::Key << info->parameters[i].name << YAML::Value << e.values[i];
     }
@@ -63,6 +64,7 @@ std::string suite_yaml(const SuiteDocument& suite) {
   out << YAML::Key << "experiments" << YAML::Value << YAML::BeginSeq;
   for (const SuiteDocument::Experiment& ex : suite.experiments) {
     out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << YAML::DoubleQuoted << ex.name;
+    if (!ex.group.empty()) out << YAML::Key << "group" << YAML::Value << YAML::DoubleQuoted << ex.group;
     if (!ex.logs.empty()) {
       out << YAML::Key << "logs" << YAML::Value << YAML::BeginSeq;
       for (const std::string& log : ex.logs) out << YAML::DoubleQuoted << log;

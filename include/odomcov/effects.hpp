@@ -5,6 +5,7 @@
 #pragma once
 
 #include <memory>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,9 @@ struct CustomEffect;
 struct EffectSpec {
   std::string name;
   std::vector<double> values;
+  /// group_variation only: the parameter it varies between groups, "<effect>.<parameter>" of
+  /// another effect in the same list (e.g. "wheelbase_error.Eb"); empty for every other effect.
+  std::string target = {};
   /// The definition of a custom effect (docs/effects.md, "Custom effects"); null for a
   /// catalogue effect.
   std::shared_ptr<const CustomEffect> custom = nullptr;
@@ -53,6 +57,10 @@ struct EffectInfo {
   /// True when the effect makes the errors non-Gaussian (heavy tails): a model with it expects
   /// the kurtosis compare tests for.
   bool heavy_tails = false;
+  /// True when the effect acts across the runs of a group (group_variation): it is not seen by
+  /// one run alone, so the simulator of one path and the model of one run leave it out; synth
+  /// draws it per group and the suite likelihood correlates the runs of a group (likelihood.hpp).
+  bool grouped = false;
 };
 
 /// A custom effect, defined in YAML: its own parameters and up to four expressions over the
@@ -76,6 +84,9 @@ struct CustomEffect {
   /// The description fit and diagnose use: parameters unbounded and signed (identity fit
   /// transform), neutral at the starting value; systematic.
   EffectInfo info;
+  /// What the expressions depend on, set by define_custom_effect: 0 nothing, 1 the increment
+  /// (v, kappa, r, dir, turn), 2 the history (s, t).
+  int dependence = 0;
 
   bool operator==(const CustomEffect& other) const;
 };
@@ -123,13 +134,37 @@ class EffectError : public InputError {
   EffectError(const std::string& key, const std::string& what) : InputError("", 0, key, what) {}
 };
 
-/// Throws EffectError unless every spec passes check_effect, no name repeats and the list has
+/// The name of the one effect that varies another effect's parameter between groups.
+inline constexpr const char* kGroupVariation = "group_variation";
+
+/// "" when the list's group_variation (if any) names a parameter of another effect in the list
+/// that moves the mean (a systematic effect), else what is wrong.
+std::string check_group_target(const EffectList& list);
+
+/// Where a list's group_variation points: the varied effect's index in the list, the index of
+/// the parameter within it, and the between-group std-dev. `present` is false without one.
+struct GroupTarget {
+  bool present = false;
+  std::size_t effect = 0, parameter = 0;
+  double sd = 0.0;
+};
+GroupTarget group_target(const EffectList& list);
+
+/// The effects one group of runs sees (world side): the list without group_variation, its
+/// target parameter drawn from N(value, sd^2) by a counter-based draw keyed on (seed, group
+/// name), so every experiment of a group gets the same value whatever the order or thread
+/// count. Throws EffectError when the draw leaves the parameter's range (sd far too large).
+EffectList group_effects(const EffectList& list, std::uint64_t seed, const std::string& group);
+
+/// Throws EffectError unless every spec passes check_effect, no name repeats, a group_variation
+/// names a systematic parameter of the list (check_group_target) and the list has
 /// at most kMaxEffects entries. Every entry point that builds effects (Simulator, predict,
 /// resolve) calls it.
 void check_effects(const EffectList& list);
 
-/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}", or for a custom
-/// effect its whole definition with the current values as starting values, on one line.
+/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}" or
+/// "- group_variation: {parameter: wheelbase_error.Eb, sd: 0.002}", or for a custom effect its
+/// whole definition with the current values as starting values, on one line.
 std::string effect_yaml(const EffectSpec& spec);
 
 }  // namespace odomcov

@@ -32,7 +32,15 @@ struct SuiteExperiment {
   bool logged = false;  // runs carry their own encoder logs
   Path path;            // the planned path (path experiments only)
   std::vector<SuiteRun> runs;
+  /// The suite's `group:` (a session, a day): experiments with the same group share
+  /// group_variation's draw, so their runs are correlated. Empty: the experiment is a group of
+  /// its own (group_key).
+  std::string group;
 };
+
+/// The key that identifies an experiment's group: "group:<group>" when it has one, else
+/// "experiment:<name>" (a group of its own).
+std::string group_key(const SuiteExperiment& ex);
 
 struct Suite {
   std::string file;

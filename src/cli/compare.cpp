@@ -104,6 +104,7 @@ int run_compare(const CompareOptions& opt) {
   check_order(opt.order);
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
+  check_second_order_size(suite, opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
   const Comparison c = compare(suite, model, opt.alpha);

@@ -1,5 +1,6 @@
 // odomcov diagnose SUITE.yaml [--effects a,b,...] [--candidates FILE.yaml] [--alpha A] [--json FILE]
 // Which physical effect is the model missing? Fitted size, evidence, and the YAML to add it.
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <sstream>
@@ -38,19 +39,25 @@ json values_json(const Candidate& c, const std::vector<double>& values) {
 int run_diagnose(const DiagnoseOptions& opt) {
   check_alpha(opt.alpha);
   for (const std::string& e : opt.effects) {
-    if (e != kWheelNoiseLevel && !find_effect(e)) throw UsageError("--effects: unknown effect '" + e + "'");
+    const std::string effect = e.substr(0, e.find('('));  // group_variation(wheelbase_error.Eb)
+    if (e != kWheelNoiseLevel && !find_effect(effect)) throw UsageError("--effects: unknown effect '" + e + "'");
   }
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
   const EffectList own = opt.candidates.empty() ? EffectList{} : load_effects(opt.candidates);
   for (std::size_t i = 0; i < own.size(); ++i) {
+    const int line = own[i].custom ? own[i].custom->line : 0;
     if (find_spec(suite.model_effects, own[i].name)) {
-      const int line = own[i].custom ? own[i].custom->line : 0;
       throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
                        "name clash: " + quote(own[i].name) + " is already in the suite's model");
     }
+    if (own[i].values.empty()) {
+      throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
+                       "a candidate needs a parameter to fit (custom: parameters: {name: start})");
+    }
   }
   check_order(opt.order);
+  check_second_order_size(suite, opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
   check_finite_start(suite, model, "diagnosis");
@@ -70,10 +77,14 @@ int run_diagnose(const DiagnoseOptions& opt) {
                                               " (Mardia kurtosis z = " + fixed(d.kurtosis.statistic, 2) +
                                               ", p = " + sci(d.kurtosis.p_value, 2) + ")"
                                         : std::string("not testable (no experiment has 10 runs)"))
-      << "\n\n  candidate                  d logL   (of)        d BIC   p-value     significant\n";
+      << "\n\n";
+  int width = 24;  // wider for group_variation(<effect>.<parameter>)
+  for (const Candidate& c : d.candidates) width = std::max(width, static_cast<int>(c.effect.size()));
+  out << "  " << std::string("candidate").append(static_cast<std::size_t>(width) - 9, ' ')
+      << "   d logL   (of)        d BIC   p-value     significant\n";
   for (const Candidate& c : d.candidates) {
-    char line[200];
-    std::snprintf(line, sizeof line, "  %-24s %10.2f %-8s %10.2f   %-10.3g  %s\n", c.effect.c_str(),
+    char line[300];
+    std::snprintf(line, sizeof line, "  %-*s %10.2f %-8s %10.2f   %-10.3g  %s\n", width, c.effect.c_str(),
                   c.delta_log_likelihood, c.systematic ? "full" : "scatter", c.delta_bic, c.p_value,
                   c.significant ? "yes" : "no");
     out << line;

@@ -26,6 +26,7 @@ int run_fit(const FitOptions& opt) {
   if (opt.params.empty()) throw UsageError("--params needs at least one parameter");
   check_order(opt.order);
   const Suite suite = load_suite(opt.suite);
+  check_second_order_size(suite, opt.order);
   // After loading: the suite's custom effects' parameters can be fitted too.
   for (std::size_t i = 0; i < opt.params.size(); ++i) {
     if (const std::string e = check_fit_parameter(opt.params[i], suite.model_effects); !e.empty()) {

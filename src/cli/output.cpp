@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -13,6 +14,9 @@
 
 #include "odomcov/error.hpp"
 #include "odomcov/likelihood.hpp"
+#include "odomcov/limits.hpp"
+#include "odomcov/propagation.hpp"
+#include "odomcov/second_order.hpp"
 
 namespace odomcov::cli {
 
@@ -108,6 +112,23 @@ void check_alpha(double alpha) {
 
 void check_order(int order) {
   if (order != 1 && order != 2) throw UsageError("--order must be 1 or 2");
+}
+
+void check_second_order_size(const Suite& suite, int order) {
+  if (order != 2) return;
+  const double B = suite.robot.wheelbase_m;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    std::size_t most = 0;
+    if (!ex.logged) most = second_order_piece_count(model_pieces(ex.path, B), B);
+    for (const SuiteRun& run : ex.logged ? ex.runs : std::vector<SuiteRun>{}) {
+      most = std::max(most, second_order_piece_count(coarsen_pieces(run.pieces, B), B));
+    }
+    if (most > kMaxSecondOrderPieces) {
+      throw InputError(suite.file, 0, "experiments." + ex.name,
+                       "order 2 needs " + std::to_string(most) + " quadrature pieces here, above the limit " +
+                           std::to_string(kMaxSecondOrderPieces) + " (its cost is quadratic); use --order 1");
+    }
+  }
 }
 
 void check_finite_start(const Suite& suite, const SuiteModel& model, const std::string& what) {

@@ -56,6 +56,11 @@ void check_threads(int threads);
 /// noise and no measurement noise: a singular predicted covariance) gives the optimiser nothing
 /// to climb. Refused with an InputError naming the suite's robot line (exit 2), never a fit that
 /// prints -inf or "inf" improvements.
+/// compare, fit and diagnose with --order 2: every experiment's order-2 prediction must stay
+/// within kMaxSecondOrderPieces (limits.hpp; its cost is quadratic), else an InputError naming
+/// the experiment (exit 2) before any work.
+void check_second_order_size(const Suite& suite, int order);
+
 void check_finite_start(const Suite& suite, const SuiteModel& model, const std::string& what);
 
 /// CLI11 check for unsigned options (seeds): digits only, so "-1" is refused instead of

@@ -13,6 +13,7 @@
 #include <array>
 #include <cmath>
 #include <mutex>
+#include <utility>
 
 #include "effect.hpp"
 #include "odomcov/format.hpp"
@@ -31,7 +32,7 @@ class Compiled {
     for (int i = 0; i < kVariables; ++i) parser_.DefineVar(custom_effect_variables()[i], &vars_[i]);
     for (std::size_t i = 0; i < parameters.size(); ++i) parser_.DefineConst(parameters[i], values[i]);
     parser_.SetExpr(text);
-    parser_.Eval();  // compiles: an unknown name or a syntax error throws here
+    parser_.Eval();  // compiles to bytecode: an unknown name or a syntax error throws here
     if (parser_.GetNumResults() != 1) {
       throw mu::Parser::exception_type("one expression expected, got " +
                                        std::to_string(parser_.GetNumResults()) + " separated by ','");
@@ -40,7 +41,8 @@ class Compiled {
   Compiled(const Compiled&) = delete;
   Compiled& operator=(const Compiled&) = delete;
 
-  /// The strongest dependence of the expression on the motion.
+  /// The strongest dependence of the expression on the motion (GetUsedVar parses again and
+  /// drops the bytecode: only for checking a definition).
   effects::Dependence dependence() const {
     effects::Dependence d = effects::Dependence::none;
     for (const auto& [name, address] : parser_.GetUsedVar()) {
@@ -55,8 +57,10 @@ class Compiled {
     vars_[kR] = m.r;
     vars_[kDir] = m.dir;
     vars_[kTurn] = m.turn;
-    vars_[kS] = m.s_m;
-    vars_[kT] = m.t_s;
+    // s and t at the middle of the increment: a model piece (many samples long) then gets the
+    // mean of a linear dependence exactly, as the simulator's samples sum it.
+    vars_[kS] = m.s_m + 0.25 * (std::abs(m.dL_m) + std::abs(m.dR_m));
+    vars_[kT] = m.t_s + 0.5 * m.dt_s;
     return parser_.Eval();
   }
 
@@ -82,10 +86,11 @@ class Custom final : public effects::Effect {
       } catch (const mu::Parser::exception_type& e) {
         fail_at(*exprs[i], e.GetMsg());
       }
-      dependence_ = std::max(dependence_, compiled_[i]->dependence());
     }
   }
-  effects::Dependence dependence() const override { return dependence_; }
+  effects::Dependence dependence() const override {
+    return static_cast<effects::Dependence>(def_->dependence);
+  }
   void systematic(const effects::Motion& m, effects::Systematic& f) const override {
     const std::lock_guard<std::mutex> lock(mutex_);
     const double scale = value(0, m), wheelbase = value(3, m);
@@ -114,15 +119,15 @@ class Custom final : public effects::Effect {
     fail_at(expression(i), "evaluates to " + format_number(x) + " (" + what + ") at v = " +
                                format_number(m.v_mps) + ", kappa = " + format_number(m.kappa_per_m) +
                                ", r = " + format_number(m.r) + ", dir = " + std::to_string(m.dir) +
-                               ", turn = " + std::to_string(m.turn) + ", s = " + format_number(m.s_m) +
-                               ", t = " + format_number(m.t_s) +
+                               ", turn = " + std::to_string(m.turn) + ", s = " +
+                               format_number(m.s_m + 0.25 * (std::abs(m.dL_m) + std::abs(m.dR_m))) +
+                               ", t = " + format_number(m.t_s + 0.5 * m.dt_s) +
                                (std::isnan(m.t_s) ? " (the path has no times here)" : ""));
   }
 
   std::shared_ptr<const CustomEffect> def_;
   mutable std::array<std::unique_ptr<Compiled>, 4> compiled_;
   mutable std::mutex mutex_;
-  effects::Dependence dependence_ = effects::Dependence::none;
 };
 
 }  // namespace
@@ -145,13 +150,24 @@ std::string check_custom_name(const std::string& name) {
   return "";
 }
 
-std::string check_custom_expression(const std::string& text, const std::vector<std::string>& parameters) {
+namespace {
+
+/// "" or muparser's message; `dependence` (when given) is raised to the expression's.
+std::string check_expression(const std::string& text, const std::vector<std::string>& parameters,
+                             effects::Dependence* dependence) {
   try {
     const Compiled c(text, parameters, std::vector<double>(parameters.size(), 0.0));
+    if (dependence) *dependence = std::max(*dependence, c.dependence());
   } catch (const mu::Parser::exception_type& e) {
     return e.GetMsg();
   }
   return "";
+}
+
+}  // namespace
+
+std::string check_custom_expression(const std::string& text, const std::vector<std::string>& parameters) {
+  return check_expression(text, parameters, nullptr);
 }
 
 bool CustomEffect::operator==(const CustomEffect& o) const {
@@ -163,7 +179,7 @@ bool CustomEffect::operator==(const CustomEffect& o) const {
 
 bool EffectSpec::operator==(const EffectSpec& o) const {
   const bool same_custom = custom == o.custom || (custom && o.custom && *custom == *o.custom);
-  return name == o.name && values == o.values && same_custom;
+  return name == o.name && values == o.values && target == o.target && same_custom;
 }
 
 EffectSpec define_custom_effect(CustomEffect def, const std::vector<double>& start) {
@@ -173,14 +189,21 @@ EffectSpec define_custom_effect(CustomEffect def, const std::vector<double>& sta
     if (t.info.name == def.name) fail_at(where, "name " + quote(def.name) + " is a catalogue effect");
   }
   if (start.size() != def.parameters.size()) fail_at(where, "one starting value per parameter");
+  for (std::size_t i = 0; i < def.parameters.size(); ++i) {
+    if (const std::string e = check_custom_name(def.parameters[i]); !e.empty()) fail_at(where, "parameter " + e);
+    for (std::size_t j = 0; j < i; ++j) {
+      if (def.parameters[j] == def.parameters[i]) fail_at(where, "parameter " + quote(def.parameters[i]) + " given twice");
+    }
+  }
   def.info = EffectInfo{};
   def.info.name = def.name;
-  def.info.physics = "custom effect " + def.name;
-  def.info.signature = "a user-defined hypothesis";
-  def.info.summary = "custom:";
-  for (const auto* e : {&def.scale, &def.scale_left, &def.scale_right, &def.wheelbase_factor}) {
-    if (!e->text.empty()) def.info.summary += " " + e->key.substr(e->key.rfind('.') + 1) + " = " + e->text + ";";
+  for (const auto& [key, e] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
+                               std::pair{"scale_right", &def.scale_right},
+                               std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+    if (!e->text.empty()) def.info.summary += std::string(def.info.summary.empty() ? "" : ", ") + key + " = " + e->text;
   }
+  def.info.physics = "custom effect " + def.name + " (" + def.info.summary + ")";
+  def.info.signature = "a user-defined hypothesis";
   def.info.systematic = true;
   for (std::size_t i = 0; i < def.parameters.size(); ++i) {
     // Unbounded and signed: the fit works on the value itself, stepping by a hundredth of its
@@ -188,14 +211,16 @@ EffectSpec define_custom_effect(CustomEffect def, const std::vector<double>& sta
     const double step = std::max(0.01, 0.01 * std::abs(start[i]));
     def.info.parameters.push_back({def.parameters[i], "", -1e300, 1e300, false, false, start[i], start[i] + step});
   }
-  auto shared = std::make_shared<const CustomEffect>(std::move(def));
-  for (const auto* e : {&shared->scale, &shared->scale_left, &shared->scale_right, &shared->wheelbase_factor}) {
+  effects::Dependence dependence = effects::Dependence::none;
+  for (const auto* e : {&def.scale, &def.scale_left, &def.scale_right, &def.wheelbase_factor}) {
     if (e->text.empty()) continue;
-    if (const std::string error = check_custom_expression(e->text, shared->parameters); !error.empty()) {
+    if (const std::string error = check_expression(e->text, def.parameters, &dependence); !error.empty()) {
       fail_at(*e, error);
     }
   }
-  return EffectSpec{shared->name, start, shared};
+  def.dependence = static_cast<int>(dependence);
+  auto shared = std::make_shared<const CustomEffect>(std::move(def));
+  return EffectSpec{shared->name, start, {}, shared};
 }
 
 namespace effects {

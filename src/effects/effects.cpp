@@ -94,11 +94,39 @@ std::string effect_yaml(const EffectSpec& spec) {
   if (spec.custom) return custom_yaml(spec);
   const EffectInfo* info = find_effect(spec.name);
   std::string text = "- " + spec.name + ": {";
+  if (!spec.target.empty()) text += "parameter: " + spec.target + (spec.values.empty() ? "" : ", ");
   for (std::size_t i = 0; i < spec.values.size(); ++i) {
     text += (i ? ", " : "") + (info ? info->parameters[i].name : "p" + std::to_string(i)) + ": " +
             format_number(spec.values[i]);
   }
   return text + "}";
+}
+
+std::string check_group_target(const EffectList& list) {
+  for (const EffectSpec& g : list) {
+    if (g.name != kGroupVariation) {
+      if (!g.target.empty()) return g.name + " takes no 'parameter'";
+      continue;
+    }
+    const std::size_t dot = g.target.find('.');
+    if (dot == std::string::npos) {
+      return "parameter must be <effect>.<parameter> of another effect in the list, got '" +
+             g.target + "'";
+    }
+    const std::string effect = g.target.substr(0, dot), param = g.target.substr(dot + 1);
+    const EffectSpec* varied = nullptr;
+    for (const EffectSpec& e : list) varied = e.name == effect && effect != kGroupVariation ? &e : varied;
+    if (!varied) return "parameter '" + g.target + "': no effect " + effect + " in the list";
+    const EffectInfo* info = find_effect(effect);
+    bool known = false;
+    for (const EffectParameterInfo& p : info->parameters) known = known || p.name == param;
+    if (!known) return "parameter '" + g.target + "': " + effect + " has no parameter " + param;
+    if (!info->systematic) {
+      return "parameter '" + g.target + "': " + effect +
+             " only adds randomness; group_variation varies a systematic parameter";
+    }
+  }
+  return "";
 }
 
 void check_effects(const EffectList& list) {
@@ -111,6 +139,9 @@ void check_effects(const EffectList& list) {
     if (const std::string error = check_effect(list[i]); !error.empty()) throw EffectError(key, error);
     for (std::size_t j = 0; j < i; ++j) {
       if (list[j].name == list[i].name) throw EffectError(key, "effect listed twice");
+    }
+    if (list[i].name == kGroupVariation) {
+      if (const std::string error = check_group_target(list); !error.empty()) throw EffectError(key, error);
     }
   }
 }

@@ -34,6 +34,7 @@ check() {  # name, allowed codes, args...
     failures=$((failures + 1))
     echo "FAIL $name: $why"; head -c 400 "$err"; echo
   fi
+  rm -rf "$out" "$out".*  # outputs can be large (synth at the world limit)
 }
 if [ "$mode" = cases ]; then
   while IFS='|' read -r name codes args then; do
@@ -52,7 +53,7 @@ else
     dir="$work/in.$count"; mkdir -p "$dir"
     case $target in
       path_config) main=config.yaml ;; sweep) main=sweep.yaml ;; world|roundtrip) main=world.yaml ;;
-      suite) main=suite.yaml ;; optiodom) main=notes.txt; dir="$dir/square/20000101"; mkdir -p "$dir" ;;
+      suite) main=suite.yaml ;; custom) main=effects.yaml ;; optiodom) main=notes.txt; dir="$dir/square/20000101"; mkdir -p "$dir" ;;
       csv_import) main=run-01.csv ;;
     esac
     awk -v dir="$dir" -v main="$main" '
@@ -66,6 +67,8 @@ else
       world|roundtrip) check "$name" "0 2" synth "$dir/$main" --out "$work/out.$name" ;;
       suite) check "$name" "0 2" compare "$dir/$main" --json "$work/out.$name" ;;
       optiodom) check "$name" "0 2" import optiodom "$dir" --out "$work/out.$name" ;;
+      custom) check "$name" "0 2" diagnose "$src/tests/data/suites/good_logs.yaml" --effects wheelbase_error \
+                --candidates "$dir/$main" --json "$work/out.$name" ;;
       csv_import) check "$name" "0 2" import csv "$dir" --wheelbase 0.3 --out "$work/out.$name" ;;
     esac
   done
