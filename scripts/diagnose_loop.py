@@ -44,6 +44,7 @@ import json
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 
@@ -202,6 +203,61 @@ def summarise(report):
             "by_type": by_type(c["experiments"])}
 
 
+def _candidates(d):
+    """Every candidate of a diagnose round in brief, best first."""
+    return [{k: c.get(k) for k in ("effect", "parameters", "stderr", "delta_log_likelihood",
+                                   "likelihood", "p_value")} for c in d["candidates"]]
+
+
+def _round_of(round_, d):
+    """One round's entry of the report from its diagnose JSON."""
+    entry = _round_fields(round_, d)
+    entry["candidates"] = _candidates(d)
+    return entry
+
+
+def _round_fields(round_, d):
+    if d["best"] is None:
+        return {"round": round_, "named": None, "before": d["before"], "explained": d.get("explained")}
+    best = d["best"]["effect"]
+    candidate = next(c for c in d["candidates"] if c["effect"] == best)
+    return {"round": round_, "named": best, "parameters": d["best"]["parameters"],
+            "stderr": candidate["stderr"], "p_value": candidate["p_value"],
+            "delta_log_likelihood": candidate["delta_log_likelihood"],
+            "likelihood": candidate.get("likelihood"), "before": d["before"], "after": d["after"],
+            "explanation": candidate.get("explanation"), "explained": d.get("explained")}
+
+
+def _verdict_of(report, d):
+    report["explained"] = d.get("explained")
+    report["alpha"] = d.get("alpha", 0.01)
+    report["odometry_correction"] = d.get("odometry_correction")
+    report["residuals"] = d.get("residuals")
+
+
+def rebuild(out):
+    """The report of a loop from the files it left in `out`, also of one that was stopped
+    before it ended (its loop.json is written last): the rounds done so far."""
+    report = {"suite": os.path.join(out, "suite.yaml"), "rounds": [], "fit": None,
+              "compare_rounds": [os.path.join(out, "compare-before.json")], "partial": True}
+    round_ = 0
+    while os.path.exists(os.path.join(out, f"diagnose-{round_}.json")):
+        with open(os.path.join(out, f"diagnose-{round_}.json")) as f:
+            d = json.load(f)
+        _verdict_of(report, d)
+        report["rounds"].append(_round_of(round_, d))
+        compared = os.path.join(out, f"compare-round-{round_ + 1}.json")
+        if d["best"] is not None and os.path.exists(compared):
+            report["compare_rounds"].append(compared)
+        round_ += 1
+    if os.path.exists(os.path.join(out, "fit.json")):
+        with open(os.path.join(out, "fit.json")) as f:
+            report["fit"] = json.load(f)
+    if not os.path.exists(os.path.join(out, "compare-after.json")):
+        shutil.copy(report["compare_rounds"][-1], os.path.join(out, "compare-after.json"))
+    return report
+
+
 def resummarise(report, out):
     """Re-reads every compare JSON a finished loop left in `out` (after this script's summary
     changed: no odomcov run)."""
@@ -214,6 +270,10 @@ def resummarise(report, out):
     for s in report["rounds"]:
         if s["named"]:
             s["compare"] = again(f"compare-round-{s['round'] + 1}.json")
+        path = os.path.join(out, f"diagnose-{s['round']}.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                s["candidates"] = _candidates(json.load(f))
     held = report.get("holdout")
     if held:
         for key in ("compare_after", "compare_fit"):
@@ -251,22 +311,11 @@ def loop(odomcov, suite, out, rounds, candidates=None, order=None):
         run([odomcov, "diagnose", work, "--json", path] + diagnose_args(candidates, order))
         with open(path) as f:
             d = json.load(f)
-        report["explained"] = d.get("explained")
-        report["alpha"] = d.get("alpha", 0.01)
-        report["odometry_correction"] = d.get("odometry_correction")
-        report["residuals"] = d.get("residuals")
+        _verdict_of(report, d)
+        report["rounds"].append(_round_of(round_, d))
         if d["best"] is None:
-            report["rounds"].append({"round": round_, "named": None, "before": d["before"],
-                                     "explained": d.get("explained")})
             break
         best = d["best"]["effect"]
-        candidate = next(c for c in d["candidates"] if c["effect"] == best)
-        report["rounds"].append({
-            "round": round_, "named": best, "parameters": d["best"]["parameters"],
-            "stderr": candidate["stderr"], "p_value": candidate["p_value"],
-            "delta_log_likelihood": candidate["delta_log_likelihood"],
-            "likelihood": candidate.get("likelihood"), "before": d["before"], "after": d["after"],
-            "explanation": candidate.get("explanation"), "explained": d.get("explained")})
         named.append((best, list(d["best"]["parameters"])))
         set_model(work, d["after"]["yaml"])
         # The compare of each round's model, for scripts/plot_loop.py.
@@ -449,6 +498,9 @@ def markdown(report):
         rows.append("")
     rows.extend(verdict_lines(report))
     rows.extend(correction_lines(report))
+    if report.get("partial"):
+        rows += ["", f"(Stopped before its end: the {len(report['rounds'])} rounds done; no joint "
+                 "fit unless it was reached; held-out runs judged with the model as far as it got.)"]
     return "\n".join(rows)
 
 
@@ -521,8 +573,9 @@ def parse_args():
     held.add_argument("--train", metavar="REGEX",
                       help="split SUITE: the loop runs on the experiments whose names match")
     parser.add_argument("--render", action="store_true",
-                        help="no odomcov run: re-read the compare JSONs of a finished loop in "
-                             "--out, rewrite its loop.json and print its report again")
+                        help="re-read the compare JSONs of a loop in --out, rewrite its loop.json "
+                             "and print its report again (no odomcov run for a finished loop; for "
+                             "one stopped early, the rounds done and the held-out compares)")
     parser.add_argument("--test", metavar="REGEX",
                         help="with --train: judge on the experiments whose names match "
                              "(default: every experiment --train leaves out)")
@@ -535,8 +588,17 @@ def parse_args():
 def main():
     args = parse_args()
     if args.render:
-        with open(os.path.join(args.out, "loop.json")) as f:
-            report = resummarise(json.load(f), args.out)
+        path = os.path.join(args.out, "loop.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                report = json.load(f)
+        else:
+            report = rebuild(args.out)
+            held = os.path.join(args.out, "holdout.yaml")
+            if os.path.exists(held):  # judged with the model as far as the loop got
+                report["holdout"] = judge_holdout(args.odomcov, held, args.out, args.order)
+                report["holdout"]["suite"] = held
+        report = resummarise(report, args.out)
         with open(os.path.join(args.out, "loop.json"), "w") as f:
             json.dump(report, f, indent=1)
         print(markdown(report))

@@ -21,8 +21,12 @@ def held_model(report):
 
 def sizes(report):
     fit = report.get("fit")
-    if not fit:
-        return ", ".join(f"{s['named']}" for s in report["rounds"] if s["named"]) or "nothing"
+    if not fit:  # a loop stopped before its joint fit: each effect as diagnose sized it
+        return "; ".join(", ".join(f"{s['named']}.{k} = {v:.5g} ± {s['stderr'][k]:.2g}"
+                                   for k, v in s["parameters"].items())
+                         for s in report["rounds"] if s["named"]) + \
+            " (no joint fit: as diagnose named them)" if any(s["named"] for s in report["rounds"]) \
+            else "nothing"
     return ", ".join(f"{k} = {v:.5g} ± {fit['stderr'][k]:.2g}" for k, v in fit["parameters"].items())
 
 

@@ -96,6 +96,8 @@ if want optiodom; then
       --title "OptiOdom $type runs against the nominal model (B = 0.2 m, kL = kR = 1e-3)" \
       --out "$out/compare_nominal_$type.png"
   done
+  # Where each path type turns (spin fraction) and how fast it drives, per campaign.
+  save "$out/features.md" "$python" scripts/optiodom_features.py "$suite"
   # The loop of issues 7 and 10: diagnose, adopt the effect it names, repeat; then compare and
   # fit; every NEES also per path type. In-sample on all the runs, then three hold-outs, each
   # learnt on some runs of the one imported suite and judged on the others: by path type (train
