@@ -3,10 +3,13 @@
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
+#include <string>
 
+#include "odomcov/limits.hpp"
 #include "odomcov/propagation.hpp"
 #include "odomcov/second_order.hpp"
 #include "odomcov/statistics.hpp"
@@ -34,6 +37,24 @@ Vector3 group_column(const std::vector<ArcSegment>& pieces, const std::vector<do
 }
 
 }  // namespace
+
+std::string second_order_problem(const Suite& suite, int order) {
+  if (order != 2) return "";
+  const double B = suite.robot.wheelbase_m;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    std::size_t most = 0;
+    if (!ex.logged) most = second_order_piece_count(model_pieces(ex.path, B), B);
+    for (const SuiteRun& run : ex.logged ? ex.runs : std::vector<SuiteRun>{}) {
+      most = std::max(most, second_order_piece_count(coarsen_pieces(run.pieces, B), B));
+    }
+    if (most > kMaxSecondOrderPieces) {
+      return ex.name + ": order 2 needs " + std::to_string(most) +
+             " quadrature pieces here, above the limit " + std::to_string(kMaxSecondOrderPieces) +
+             " (its cost is quadratic); use --order 1";
+    }
+  }
+  return "";
+}
 
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model) {
   const double B = model.robot.wheelbase_m;

@@ -2,6 +2,7 @@
 // covariance (measurement noise included), and the Gaussian log-likelihood and its scatter part.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "odomcov/suite.hpp"
@@ -31,6 +32,11 @@ struct RunResidual {
 /// Residuals of every run of every experiment (runs with logs are predicted one by one, in
 /// parallel), with each run's group and group column.
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model);
+
+/// "" when every experiment's order-2 prediction stays within kMaxSecondOrderPieces
+/// (limits.hpp; its cost is quadratic), else which experiment exceeds it. With `order` 1 always
+/// "". compare, fit and diagnose at order 2 need it empty (the CLI refuses such a suite first).
+std::string second_order_problem(const Suite& suite, int order);
 
 /// The grouped likelihood in its sequential form (the chain rule over each group's runs, in
 /// suite order): each run's predictive distribution given the earlier runs of its group. For a

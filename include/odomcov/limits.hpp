@@ -22,10 +22,11 @@ inline constexpr double kMaxSimulationSteps = 1e12;
 /// Pieces the propagation engine cuts a planned path into (model_pieces: one per 0.25 m or
 /// 0.25 rad): bounds the engine's memory (about 100 bytes a piece) and time.
 inline constexpr double kMaxModelPieces = 1'000'000;
-/// Quadrature pieces of one order-2 prediction (1 m or 0.25 rad each, about 4000 m of line):
-/// its double integral is quadratic in them (4000 pieces: about 10 s on one core). Beyond it,
-/// `run` reports order 2 as untestable and commands with --order 2 refuse the suite.
-inline constexpr std::size_t kMaxSecondOrderPieces = 4'000;
+/// Quadrature pieces of one order-2 prediction (1 m or 0.25 rad each, about 1000 m of line):
+/// its double integral is quadratic in them (1000 pieces: about 0.7 s on one core, 10x that
+/// under the sanitizers; 4000 timed out the fuzz targets). Beyond it, `run` reports order 2 as
+/// untestable and commands at order 2 (compare, fit and diagnose default to it) refuse the suite.
+inline constexpr std::size_t kMaxSecondOrderPieces = 1'000;
 /// Runs of all experiments of one world file together (synth holds one experiment's runs and
 /// writes a CSV row per run: 1e6 rows are about 70 MB).
 inline constexpr std::int64_t kMaxWorldRuns = 1'000'000;

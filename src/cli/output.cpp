@@ -115,19 +115,8 @@ void check_order(int order) {
 }
 
 void check_second_order_size(const Suite& suite, int order) {
-  if (order != 2) return;
-  const double B = suite.robot.wheelbase_m;
-  for (const SuiteExperiment& ex : suite.experiments) {
-    std::size_t most = 0;
-    if (!ex.logged) most = second_order_piece_count(model_pieces(ex.path, B), B);
-    for (const SuiteRun& run : ex.logged ? ex.runs : std::vector<SuiteRun>{}) {
-      most = std::max(most, second_order_piece_count(coarsen_pieces(run.pieces, B), B));
-    }
-    if (most > kMaxSecondOrderPieces) {
-      throw InputError(suite.file, 0, "experiments." + ex.name,
-                       "order 2 needs " + std::to_string(most) + " quadrature pieces here, above the limit " +
-                           std::to_string(kMaxSecondOrderPieces) + " (its cost is quadratic); use --order 1");
-    }
+  if (const std::string e = second_order_problem(suite, order); !e.empty()) {
+    throw InputError(suite.file, 0, "experiments", e);
   }
 }
 

@@ -16,7 +16,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       runs += ex.runs.size();
       for (const SuiteRun& r : ex.runs) runs += r.pieces.size();
     }
-    if (runs <= 50'000) compare(suite, suite_model(suite), 0.01);
+    if (runs <= 50'000 && second_order_problem(suite, suite_model(suite).order).empty()) {
+      compare(suite, suite_model(suite), 0.01);  // as the CLI: order 2 within its limit
+    }
   });
   return 0;
 }
