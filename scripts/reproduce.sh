@@ -122,6 +122,13 @@ if want optiodom; then
   loop paths --train '^(square|ivanjko)-' --test '^(circular|free)-'
   loop dec_to_jun --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'
   loop jun_to_dec --train '^[a-z]+-(2306|2506)' --test '^[a-z]+-2312'
+  # group_variation (group: = the recording day, set by the importer) added to the in-sample and
+  # path-type hold-out models, on the parameter each loop named for the wheelbase.
+  save "$out/group.md" "$python" scripts/optiodom_group.py --odomcov "$odomcov" \
+    --suite "$suite/suite.yaml" --out "$suite-group" \
+    "all:$suite-loop-all:turn_dependent_wheelbase.Eb_spin:." \
+    "paths:$suite-loop-paths:wheelbase_error.Eb:^(square|ivanjko)-:^(circular|free)-"
+  cp "$suite-group/group.json" "$out/group.json"
   # One table across the four: effects and sizes, NEES and heading bias per path type.
   save "$out/summary.md" "$python" scripts/loop_summary.py "all=$out/loop_all.json" \
     "paths=$out/loop_paths.json" "dec_to_jun=$out/loop_dec_to_jun.json" \
