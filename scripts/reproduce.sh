@@ -103,8 +103,8 @@ if want optiodom; then
   # learnt on some runs of the one imported suite and judged on the others: by path type (train
   # on the squares and Ivanjko paths, test on the circles and free paths), and by campaign
   # (December 2020 -> June 2020, and the reverse; the January 2021 free paths are in neither).
-  # Order 1: on OptiOdom's heading spreads (< 0.05 rad) it agrees with order 2 to well inside
-  # the standard errors, and it keeps the ~25 diagnose rounds affordable on two shared cores.
+  # Order 1: on the in-sample model, compare at order 2 gives the same NEES to three decimals
+  # (results/optiodom/README.md), and order 1 keeps the ~20 diagnose rounds affordable.
   loop() {  # NAME [diagnose_loop.py options]
     local name=$1 dir="$suite-loop-$1" holdout=()
     shift
