@@ -103,8 +103,8 @@ if want optiodom; then
   # learnt on some runs of the one imported suite and judged on the others: by path type (train
   # on the squares and Ivanjko paths, test on the circles and free paths), and by campaign
   # (December 2020 -> June 2020, and the reverse; the January 2021 free paths are in neither).
-  # Order 1: on OptiOdom's heading spreads (< 0.05 rad) it agrees with order 2 to well inside
-  # the standard errors, and it keeps the ~25 diagnose rounds affordable on two shared cores.
+  # Order 1: on the in-sample model, compare at order 2 gives the same NEES to three decimals
+  # (results/optiodom/README.md), and order 1 keeps the ~20 diagnose rounds affordable.
   loop() {  # NAME [diagnose_loop.py options]
     local name=$1 dir="$suite-loop-$1" holdout=()
     shift
@@ -122,6 +122,13 @@ if want optiodom; then
   loop paths --train '^(square|ivanjko)-' --test '^(circular|free)-'
   loop dec_to_jun --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'
   loop jun_to_dec --train '^[a-z]+-(2306|2506)' --test '^[a-z]+-2312'
+  # group_variation (group: = the recording day, set by the importer) added to the in-sample and
+  # path-type hold-out models, on the parameter each loop named for the wheelbase.
+  save "$out/group.md" "$python" scripts/optiodom_group.py --odomcov "$odomcov" \
+    --suite "$suite/suite.yaml" --out "$suite-group" \
+    "all:$suite-loop-all:turn_dependent_wheelbase.Eb_spin:." \
+    "paths:$suite-loop-paths:wheelbase_error.Eb:^(square|ivanjko)-:^(circular|free)-"
+  cp "$suite-group/group.json" "$out/group.json"
   # One table across the four: effects and sizes, NEES and heading bias per path type.
   save "$out/summary.md" "$python" scripts/loop_summary.py "all=$out/loop_all.json" \
     "paths=$out/loop_paths.json" "dec_to_jun=$out/loop_dec_to_jun.json" \
