@@ -71,12 +71,17 @@ FittedNames split_fitted_names(const EffectList& effects) {
 /// coordinate step: the systematic effects on the full likelihood (random ones held), then the
 /// random effects on the scatter part (systematic ones held). A random effect is thus never
 /// sized by a mean misfit, and a systematic one always sees the spread the random ones give.
-SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* progress) {
+SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* progress,
+                 FitPath path, ResidualCache& cache) {
   const FittedNames names = split_fitted_names(model.effects);
   SuiteModel out = model;
   std::atomic<std::int64_t>* counter = progress ? &progress->evaluations : nullptr;
-  if (!names.systematic.empty()) out = fit(suite, out, names.systematic, Likelihood::full, counter).model;
-  if (!names.random.empty()) out = fit(suite, out, names.random, Likelihood::scatter, counter).model;
+  if (!names.systematic.empty()) {
+    out = fit(suite, out, names.systematic, Likelihood::full, counter, path, &cache).model;
+  }
+  if (!names.random.empty()) {
+    out = fit(suite, out, names.random, Likelihood::scatter, counter, path, &cache).model;
+  }
   if (progress) ++progress->fits_done;
   return out;
 }
@@ -141,7 +146,10 @@ double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
 }  // namespace
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
-                   const std::vector<std::string>& only, DiagnoseProgress* progress) {
+                   const std::vector<std::string>& only, DiagnoseProgress* progress, FitPath path) {
+  // Every exact propagation of the round, kept: the fast path's anchors and difference points
+  // around the base model are shared by all candidates.
+  ResidualCache cache(suite);
   Diagnosis d;
   d.alpha = alpha;
   d.runs = run_count(suite);
@@ -154,8 +162,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   // candidate refits the model's effects of its own kind with it (systematic ones on the full
   // likelihood, random ones on the scatter part); the others stay at their refitted values.
   const FittedNames nuisance = split_fitted_names(model.effects);
-  const SuiteModel base = refit(suite, model, progress);
-  const auto base_residuals = residuals(suite, base);
+  const SuiteModel base = refit(suite, model, progress, path, cache);
+  const auto& base_residuals = cache.at(base);
   const double base_full = log_likelihood(base_residuals);
   const double base_scatter = scatter_log_likelihood(base_residuals);
   const std::vector<double> base_by_experiment = experiment_log_likelihoods(base_residuals);
@@ -186,7 +194,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     const std::vector<std::string> own = fitted_names(name);
     fitted.insert(fitted.end(), own.begin(), own.end());
     const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
-    const FitResult f = fit(suite, base, fitted, kind, progress ? &progress->evaluations : nullptr);
+    const FitResult f =
+        fit(suite, base, fitted, kind, progress ? &progress->evaluations : nullptr, path, &cache);
     // With heavy tails the observed information understates the uncertainty: sandwich SEs.
     const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
     c.model = f.model;
@@ -235,7 +244,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
         c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
       }
     }
-    const auto candidate_residuals = residuals(suite, c.model);
+    const auto& candidate_residuals = cache.at(c.model);
     c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - base_full;
     const std::vector<double> by_experiment = experiment_log_likelihoods(candidate_residuals);
     std::vector<std::pair<std::string, double>> gains;
@@ -277,7 +286,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     // The model to adopt: everything refitted by its part of the likelihood, now that the new
     // effect is in (the earlier effects were sized without it).
     Candidate& best = d.candidates.front();
-    best.model = refit(suite, best.model, progress);
+    best.model = refit(suite, best.model, progress, path, cache);
     if (best.effect == kWheelNoiseLevel) {
       best.values = {best.model.robot.noise.k_left, best.model.robot.noise.k_right};
     } else {
@@ -292,7 +301,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
   if (!d.explained) {
     const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
-    d.residuals = residual_alignment(suite, final_model, residuals(suite, final_model));
+    d.residuals = residual_alignment(suite, final_model, cache.at(final_model));
   }
   return d;
 }

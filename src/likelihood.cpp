@@ -21,29 +21,37 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
   const double B = model.robot.wheelbase_m;
   const Matrix3 meas = model.measurement_noise.covariance();
   std::vector<std::vector<RunResidual>> out(suite.experiments.size());
+  // Every unit of work: a planned-path experiment (one prediction serves all its runs) or one
+  // logged run. They run in parallel over the whole suite (most logged experiments are single
+  // runs, so a loop per experiment would leave cores idle).
+  std::vector<std::pair<std::size_t, std::size_t>> work;
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     const SuiteExperiment& ex = suite.experiments[e];
     out[e].resize(ex.runs.size());
     if (!ex.logged) {
-      std::vector<double> durations;
-      const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
-      const Prediction p =
-          predict_with_order(pieces, durations, model.robot, model.effects, model.order);
-      const Vector3 odometry = sampled_end_pose(ex.path, B);
-      for (std::size_t r = 0; r < ex.runs.size(); ++r) {
-        out[e][r] = {pose_error(ex.runs[r].measured, odometry), p.mean + p.noise_mean,
-                     p.cov + meas};
-      }
+      work.emplace_back(e, 0);
       continue;
     }
-    tbb::parallel_for(std::size_t{0}, ex.runs.size(), [&](std::size_t r) {
-      const Prediction p =
-          predict_with_order(ex.runs[r].pieces, ex.runs[r].durations_s, model.robot,
-                             model.effects, model.order);
+    for (std::size_t r = 0; r < ex.runs.size(); ++r) work.emplace_back(e, r);
+  }
+  tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
+    const auto [e, r] = work[w];
+    const SuiteExperiment& ex = suite.experiments[e];
+    if (ex.logged) {
+      const Prediction p = predict_with_order(ex.runs[r].pieces, ex.runs[r].durations_s,
+                                              model.robot, model.effects, model.order);
       out[e][r] = {pose_error(ex.runs[r].measured, p.odometry_end_pose), p.mean + p.noise_mean,
                    p.cov + meas};
-    });
-  }
+      return;
+    }
+    std::vector<double> durations;
+    const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
+    const Prediction p = predict_with_order(pieces, durations, model.robot, model.effects, model.order);
+    const Vector3 odometry = sampled_end_pose(ex.path, B);
+    for (std::size_t i = 0; i < ex.runs.size(); ++i) {
+      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean, p.cov + meas};
+    }
+  }, tbb::simple_partitioner());
   return out;
 }
 

@@ -93,6 +93,8 @@ struct Node {
   double m = 0.0;     // I_td/2 + g.G^d
   double g_gd = 0.0;  // g.G^d (own piece)
   double weight = 0.0;
+  double half_damping = 0.0;  // exp(-V/2)
+  double expm1_W = 0.0;       // expm1(W): C(s, t) for s < t when there are no per-run constants
   const double* g = nullptr;   // m entries
   const double* gd = nullptr;  // m entries, G^d of the node's piece
 };
@@ -130,6 +132,8 @@ void make_node(const Model& model, std::size_t k, double u, double weight, doubl
   node.g_gd = dot(g_buffer, node.gd, m);
   node.m = 0.5 * p.i_td + node.g_gd;
   node.weight = weight;
+  node.half_damping = std::exp(-0.5 * node.V);
+  node.expm1_W = std::expm1(node.W);
 }
 
 /// Adds the integrands of (3) and (4) for one pair s < t, times `weight`.
@@ -142,8 +146,11 @@ inline void add_pair(const Node& s, const Node& t, int m, double weight, Complex
     gs_gdt += s.g[i] * t.gd[i];
     gds_gdt += s.gd[i] * t.gd[i];
   }
-  const double c = s.W + gs_gt;  // C(s, t), s < t
-  const double e = weight * std::exp(-0.5 * (s.V + t.V));
+  // C(s, t) = W(s) + g(s).g(t) for s < t: without per-run constants a property of s alone.
+  // expm1(-C) = -expm1(C) / (1 + expm1(C)), exact and as accurate at small C.
+  const double em = m == 0 ? s.expm1_W : std::expm1(s.W + gs_gt);
+  const double em_minus = -em / (1.0 + em);
+  const double e = weight * s.half_damping * t.half_damping;
   const double kappa_s = -0.5 * s.i_td + s.g_gd - gt_gds;
   const double kappa_t = -0.5 * t.i_td + gs_gdt - t.g_gd;
   const double lambda_s = 1.5 * s.i_td + s.g_gd + gt_gds;
@@ -156,8 +163,8 @@ inline void add_pair(const Node& s, const Node& t, int m, double weight, Complex
                            t.d * (-s.i_td - gt_gds) + imag_common);
   const Complex diff_plus(gds_gdt - lambda_s * lambda_t + s.m * t.m,
                           t.d * (s.i_td + gt_gds) + imag_common);
-  sum_conj += s.A * std::conj(t.A) * (e * (std::expm1(c) * x_minus + diff_minus));
-  sum_plain += s.A * t.A * (e * (std::expm1(-c) * x_plus + diff_plus));
+  sum_conj += s.A * std::conj(t.A) * (e * (em * x_minus + diff_minus));
+  sum_plain += s.A * t.A * (e * (em_minus * x_plus + diff_plus));
 }
 
 /// The pieces of the order-2 quadrature: runs of identical consecutive pieces (model_pieces

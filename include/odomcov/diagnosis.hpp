@@ -92,8 +92,12 @@ struct DiagnoseProgress {
   std::atomic<std::int64_t> fits_done{0};
   std::atomic<std::int64_t> evaluations{0};
 };
+/// `path` is how every fit evaluates the likelihood (FitPath): the fast path shares one
+/// ResidualCache over the round, so each candidate parameter's sensitivity around the refitted
+/// model is propagated once.
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
-                   const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr);
+                   const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr,
+                   FitPath path = FitPath::fast);
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts
