@@ -248,11 +248,15 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
     const double a = r.angle_rad;
     const Matrix3 phi = arc_transition(d, a);
     const Matrix3 q = arc_noise_covariance(d, a, r.intensity);
-    const Eigen::MatrixXd A = arc_input_gain(d, a) * r.input_columns;
     const double v0 = P(2, 2);
-    const Matrix3 cross = phi * C * A.transpose();
-    P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
-    C = phi * C + A;
+    if (constants == 0) {
+      P = phi * P * phi.transpose() + q;
+    } else {
+      const Eigen::MatrixXd A = arc_input_gain(d, a) * r.input_columns;
+      const Matrix3 cross = phi * C * A.transpose();
+      P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
+      C = phi * C + A;
+    }
     noise_mean += noise_mean_of_piece(true_pose.z(), d, a, v0, P(2, 2) - v0, r.intensity(0, 1));
     true_pose = compose(true_pose, arc_displacement(d, a));
     odometry = drive(odometry, r.encoder, B);
