@@ -18,29 +18,16 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 /// One fitted parameter: where it lives in the model and the coordinate the optimiser sees.
-struct Handle {
-  enum class Kind { k_left, k_right, wheelbase, effect };
-  enum class Transform { log, atanh, sqrt, identity };
+struct Handle : FitCoordinate {
+  using Transform = FitCoordinate::Transform;
   std::string name;
-  Kind kind = Kind::k_left;
+  const RobotParameter* robot = nullptr;  // a robot parameter, else an effect's:
   std::string effect;
   std::size_t index = 0;  // parameter index within the effect
-  Transform transform = Transform::log;
-  double lower_u = -HUGE_VAL, upper_u = HUGE_VAL;
-  double step_u = 0.1;  // BOBYQA's initial step
-  double mid = 0.0, half = 1.0;  // atanh: the open interval (mid - half, mid + half)
-  // The fast path's difference step in the value: max(fd_abs, fd_rel |v - fd_origin|).
-  double fd_abs = 0.0, fd_rel = 0.0, fd_origin = 0.0;
 
   double fd_step(double v) const { return std::max(fd_abs, fd_rel * std::abs(v - fd_origin)); }
-
   double& ref(SuiteModel& m) const {
-    switch (kind) {
-      case Kind::k_left: return m.robot.noise.k_left;
-      case Kind::k_right: return m.robot.noise.k_right;
-      case Kind::wheelbase: return m.robot.wheelbase_m;
-      case Kind::effect: break;
-    }
+    if (robot) return robot->ref(m.robot);
     for (EffectSpec& e : m.effects) {
       if (e.name == effect) return e.values[index];
     }
@@ -75,65 +62,34 @@ struct Handle {
   }
 };
 
-/// Parses "k_left", "wheelbase", "wheel_diameter_ratio.Ed", ... and sets up its coordinate.
+const RobotParameter* find_robot_parameter(const std::string& name) {
+  for (const RobotParameter& p : robot_parameters()) {
+    if (p.name == name) return &p;
+  }
+  return nullptr;
+}
+
+/// Parses a robot parameter's or "<effect>.<parameter>" and sets up its coordinate (the robot
+/// parameter's own, or fit_coordinate from the effect parameter's declared range).
 Handle make_handle(const std::string& name, const SuiteModel& model) {
   Handle h;
-  h.name = name;
-  if (name == "k_left" || name == "k_right") {
-    h.kind = name == "k_left" ? Handle::Kind::k_left : Handle::Kind::k_right;
-    h.transform = Handle::Transform::log;
-    h.lower_u = std::log(1e-9);
-    h.upper_u = std::log(1.0);
-    h.step_u = 0.3;
-    h.fd_abs = 1e-9;
-    h.fd_rel = 0.05;
-    return h;
-  }
-  if (name == "wheelbase") {
-    h.kind = Handle::Kind::wheelbase;
-    h.transform = Handle::Transform::log;
-    h.lower_u = std::log(0.5 * model.robot.wheelbase_m);
-    h.upper_u = std::log(2.0 * model.robot.wheelbase_m);
-    h.step_u = 0.01;
-    h.fd_abs = 1e-4 * model.robot.wheelbase_m;
+  if ((h.robot = find_robot_parameter(name))) {
+    static_cast<FitCoordinate&>(h) = h.robot->coordinate(model.robot);
+    h.name = name;
     return h;
   }
   const std::size_t dot = name.find('.');
-  h.kind = Handle::Kind::effect;
-  h.effect = name.substr(0, dot);
-  const EffectInfo* info = find_effect(h.effect);
+  const std::string effect = name.substr(0, dot);
+  const EffectInfo* info = find_effect(effect);
   const std::string param = name.substr(dot + 1);
+  std::size_t index = 0;
   for (std::size_t i = 0; i < info->parameters.size(); ++i) {
-    if (info->parameters[i].name == param) h.index = i;
+    if (info->parameters[i].name == param) index = i;
   }
-  const EffectParameterInfo& p = info->parameters[h.index];
-  const double scale = std::abs(p.typical - p.neutral);
-  h.fd_abs = 0.05 * std::max(scale, 1e-9);
-  h.fd_rel = 0.05;
-  h.fd_origin = p.neutral;
-  if (p.lower <= -1e300 && p.upper >= 1e300) {  // signed and unbounded (reference_offset.dx)
-    h.transform = Handle::Transform::identity;
-    h.lower_u = p.neutral - 1e4 * scale;
-    h.upper_u = p.neutral + 1e4 * scale;
-    h.step_u = std::max(scale, 1e-6);
-  } else if (p.open_lower && p.lower == 0.0) {  // positive scale factors (Ed, Eb, Es)
-    h.transform = Handle::Transform::log;
-    h.lower_u = std::log(0.5);
-    h.upper_u = std::log(2.0);
-    h.step_u = std::max(scale, 1e-3);
-  } else if (p.open_lower && p.open_upper) {  // an open interval (a, b), e.g. rho in (-1, 1)
-    h.transform = Handle::Transform::atanh;
-    h.mid = 0.5 * (p.lower + p.upper);
-    h.half = 0.5 * (p.upper - p.lower);
-    h.lower_u = -6.0;
-    h.upper_u = 6.0;
-    h.step_u = 0.3;
-  } else {  // a size that may be zero (slip, per-run sigma, bump rate and size)
-    h.transform = Handle::Transform::sqrt;
-    h.lower_u = 0.0;
-    h.upper_u = std::sqrt(1e4 * p.typical);
-    h.step_u = 0.5 * std::sqrt(p.typical);
-  }
+  static_cast<FitCoordinate&>(h) = fit_coordinate(info->parameters[index]);
+  h.name = name;
+  h.effect = effect;
+  h.index = index;
   return h;
 }
 
@@ -271,7 +227,7 @@ void fill_estimates(FitResult& out, const std::vector<Handle>& handles, const st
   if (llt.info() != Eigen::Success) {
     out.warnings.push_back(
         "the information matrix is singular: the data cannot tell these parameters apart "
-        "(e.g. bumps.rate and bumps.sigma act only through rate sigma^2); no standard errors");
+        "(e.g. a rate and a size that act only through rate x size^2); no standard errors");
     return;
   }
   const Eigen::MatrixXd cov_u = llt.solve(Eigen::MatrixXd::Identity(N, N));
@@ -531,9 +487,8 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
 std::string model_key(const SuiteModel& m) {
   std::string key;
   auto put = [&key](double x) { key.append(reinterpret_cast<const char*>(&x), sizeof x); };
-  put(m.robot.wheelbase_m);
-  put(m.robot.noise.k_left);
-  put(m.robot.noise.k_right);
+  Robot robot = m.robot;  // every robot parameter, bit for bit
+  for (const RobotParameter& p : robot_parameters()) put(p.ref(robot));
   put(m.measurement_noise.xy_m);
   put(m.measurement_noise.theta_rad);
   put(m.order);
@@ -562,11 +517,12 @@ const std::vector<std::vector<RunResidual>>& ResidualCache::at(const SuiteModel&
 }
 
 std::string check_fit_parameter(const std::string& name) {
-  if (name == "k_left" || name == "k_right" || name == "wheelbase") return "";
+  if (find_robot_parameter(name)) return "";
   const std::size_t dot = name.find('.');
   if (dot == std::string::npos) {
-    return "unknown parameter '" + name +
-           "' (use k_left, k_right, wheelbase or <effect>.<parameter>)";
+    std::string names;
+    for (const RobotParameter& p : robot_parameters()) names += p.name + ", ";
+    return "unknown parameter '" + name + "' (use " + names + "or <effect>.<parameter>)";
   }
   const EffectInfo* info = find_effect(name.substr(0, dot));
   if (!info) return "unknown effect in '" + name + "'";

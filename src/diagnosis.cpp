@@ -39,18 +39,11 @@ std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<Run
 
 /// Systematic candidates move the mean and are judged on the full likelihood; the others only
 /// add randomness and are judged on the scatter part, which a mean misfit cannot inflate.
-bool systematic(const std::string& effect) {
-  return effect != kWheelNoiseLevel && find_effect(effect)->systematic;
-}
+bool systematic(const std::string& effect) { return find_candidate(effect)->systematic; }
 
-/// The parameters a candidate fits. bumps: only the rate; a Gaussian likelihood sees rate and
-/// sigma only through rate sigma^2, so sigma stays at its typical size there (see bumps_sigma).
-std::vector<std::string> fitted_names(const std::string& effect) {
-  if (effect == kWheelNoiseLevel) return {"k_left", "k_right"};
-  if (effect == "bumps") return {"bumps.rate"};
-  std::vector<std::string> names;
-  for (const EffectParameterInfo& p : find_effect(effect)->parameters) names.push_back(effect + "." + p.name);
-  return names;
+/// The parameters a candidate fits (CandidateType::fitted, from the effect's own metadata).
+const std::vector<std::string>& fitted_names(const std::string& effect) {
+  return find_candidate(effect)->fitted;
 }
 
 /// The fitted parameters of a model's effects, split into systematic and random ones.
@@ -89,58 +82,59 @@ SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* 
 /// True when every fitted parameter's "no effect" value is the edge of its range (a size that
 /// cannot be negative): the likelihood-ratio statistic is then a 50:50 mixture of chi^2_0 and
 /// chi^2_dof [Self87], so the p-value is half the chi^2 one.
-bool on_boundary(const std::string& effect) {
-  if (effect == kWheelNoiseLevel) return false;
-  for (const EffectParameterInfo& p : find_effect(effect)->parameters) {
-    if (!(p.neutral == p.lower && !p.open_lower)) return false;
-  }
-  return true;
-}
+bool on_boundary(const std::string& effect) { return find_candidate(effect)->on_boundary; }
 
-/// Sample excess kurtosis, bias-corrected (G2 of Joanes & Gill 1998).
-double excess_kurtosis(const std::vector<double>& x) {
-  const double n = static_cast<double>(x.size());
-  double mean = 0;
-  for (double v : x) mean += v / n;
-  double m2 = 0, m4 = 0;
-  for (double v : x) {
-    const double d = v - mean;
-    m2 += d * d / n;
-    m4 += d * d * d * d / n;
-  }
-  const double g2 = m4 / (m2 * m2) - 3.0;
-  return ((n + 1) * g2 + 6) * (n - 1) / ((n - 2) * (n - 3));
-}
-
-/// bumps' sigma by the method of moments on the straight-line experiments: along a line a bump
-/// J on one wheel moves the along-track error by J/2, so with Lambda = rate d bumps per run the
-/// fourth cumulant of the along-track error is 3 Lambda sigma^4/16 = (3/16) rate sigma^4 d,
-/// while q = rate sigma^2 is what the likelihood fitted. Pooling the lines (each cumulant from
-/// its sample excess kurtosis times its variance squared, weighted by travel) gives
-/// rate sigma^4 = (16/3) sum kappa4 / sum d and sigma^2 = rate sigma^4 / q. Returns NaN when no
-/// straight experiment of ten runs or more shows heavy tails.
-double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
-  double cumulant = 0.0, travel = 0.0;
-  for (const SuiteExperiment& ex : suite.experiments) {
-    if (ex.logged || ex.runs.size() < 10) continue;
-    double d = 0;
-    bool straight = true;
-    for (std::size_t i = 0; i < ex.path.interval_count(); ++i) {
-      const ArcSegment s = ex.path.interval(i);
-      straight = straight && s.left_m == s.right_m;
-      d += std::abs(s.center_m());
+/// The candidate's reported parameters, values and standard errors from its fit: a robot
+/// candidate's fitted parameters; an effect's every parameter (NaN standard error where not
+/// fitted), completed by the effect's own hook (EffectInfo::complete).
+void describe_fit(const Suite& suite, const FitResult& f, Eigen::Index offset, const Eigen::VectorXd& se,
+                  Candidate& c) {
+  const CandidateType& type = *find_candidate(c.effect);
+  if (type.robot) {
+    for (std::size_t i = 0; i < type.fitted.size(); ++i) {
+      const auto k = offset + static_cast<Eigen::Index>(i);
+      c.parameters.push_back(type.fitted[i]);
+      c.values.push_back(f.values(k));
+      c.stderrs.push_back(se(k));
     }
-    if (!straight || d <= 0) continue;
-    std::vector<double> along;
-    for (const SuiteRun& r : ex.runs) along.push_back(run_error(ex, r, wheelbase_m).x());
-    double mean = 0, var = 0;
-    for (double v : along) mean += v / static_cast<double>(along.size());
-    for (double v : along) var += (v - mean) * (v - mean) / static_cast<double>(along.size() - 1);
-    cumulant += excess_kurtosis(along) * var * var;
-    travel += d;
+    return;
   }
-  if (!(travel > 0 && cumulant > 0 && q > 0)) return kNaN;
-  return std::sqrt(16.0 / 3.0 * cumulant / travel / q);
+  EffectSpec* spec = nullptr;
+  for (EffectSpec& e : c.model.effects) spec = e.name == c.effect ? &e : spec;
+  const EffectInfo& info = *find_effect(c.effect);
+  std::vector<double> stderrs(info.parameters.size(), kNaN);
+  for (std::size_t p = 0; p < info.parameters.size(); ++p) {
+    c.parameters.push_back(info.parameters[p].name);
+    for (std::size_t i = 0; i < type.fitted.size(); ++i) {
+      if (type.fitted[i] == c.effect + "." + info.parameters[p].name) {
+        stderrs[p] = se(offset + static_cast<Eigen::Index>(i));
+      }
+    }
+  }
+  if (type.complete) c.note = type.complete(suite, c.model.robot.wheelbase_m, *spec, stderrs);
+  c.values = spec->values;
+  c.stderrs = stderrs;
+}
+
+/// The signature rule for the pairs a Gaussian likelihood cannot separate
+/// (EffectInfo::confused_with): when both are significant, the one the tails speak against
+/// moves to just below the other (the rest of the order stands).
+void apply_tail_rule(std::vector<Candidate>& candidates, bool heavy_tails) {
+  auto at = [&](const std::string& n) {
+    return std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) { return c.effect == n; });
+  };
+  for (const CandidateType& type : candidate_types()) {
+    if (type.confused_with.empty()) continue;
+    auto self = at(type.name), other = at(type.confused_with);
+    if (self == candidates.end() || other == candidates.end() || !self->significant || !other->significant) continue;
+    auto heavy = type.heavy_tails ? self : other, gaussian = type.heavy_tails ? other : self;
+    const bool heavy_first = heavy < gaussian;
+    if (heavy_tails != heavy_first) {
+      auto loser = heavy_tails ? gaussian : heavy;
+      auto winner = heavy_tails ? heavy : gaussian;
+      std::rotate(loser, loser + 1, winner + 1);  // loser now sits right after the winner
+    }
+  }
 }
 
 }  // namespace
@@ -169,12 +163,11 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   const std::vector<double> base_by_experiment = experiment_log_likelihoods(base_residuals);
 
   std::vector<std::string> names;
-  for (const EffectInfo& info : effect_catalogue()) {
+  for (const CandidateType& type : candidate_types()) {
     bool in_model = false;
-    for (const EffectSpec& e : model.effects) in_model = in_model || e.name == info.name;
-    if (!in_model) names.push_back(info.name);
+    for (const EffectSpec& e : model.effects) in_model = in_model || e.name == type.name;
+    if (!in_model) names.push_back(type.name);
   }
-  names.push_back(kWheelNoiseLevel);
   if (!only.empty()) {
     std::vector<std::string> kept;
     for (const std::string& n : names) {
@@ -213,37 +206,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     }
     lr = std::max(0.0, lr);
     c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
-    const auto offset = static_cast<Eigen::Index>(fitted.size() - own.size());
-    if (name == kWheelNoiseLevel) {
-      c.parameters = {"k_left", "k_right"};
-      c.values = {f.values(offset), f.values(offset + 1)};
-      c.stderrs = {se(offset), se(offset + 1)};
-    } else if (name == "bumps") {
-      // q = rate sigma^2 is what the likelihood fitted; sigma comes from the tails.
-      EffectSpec* spec = nullptr;
-      for (EffectSpec& e : c.model.effects) spec = e.name == "bumps" ? &e : spec;
-      const double sigma_fixed = spec->values[1];
-      const double q = f.values(offset) * sigma_fixed * sigma_fixed;
-      const double q_se = se(offset) * sigma_fixed * sigma_fixed;
-      const double sigma = bumps_sigma(suite, c.model.robot.wheelbase_m, q);
-      const double s = std::isfinite(sigma) ? sigma : sigma_fixed;
-      spec->values = {q / (s * s), s};
-      c.parameters = {"rate", "sigma"};
-      c.values = spec->values;
-      c.stderrs = {q_se / (s * s), kNaN};
-      c.note = "rate sigma^2 = " + format_number(q, "%.3g") + " +/- " + format_number(q_se, "%.1g") +
-               " m (what the means and covariances determine); " +
-               (std::isfinite(sigma) ? "sigma from the excess kurtosis of the along-track errors on "
-                                       "the straight lines (a moment estimate, no standard error)"
-                                     : "sigma undetermined (no straight line with heavy tails), "
-                                       "kept at " + format_number(s, "%.3g") + " m");
-    } else {
-      for (std::size_t i = 0; i < own.size(); ++i) {
-        c.parameters.push_back(own[i].substr(name.size() + 1));
-        c.values.push_back(f.values(offset + static_cast<Eigen::Index>(i)));
-        c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
-      }
-    }
+    describe_fit(suite, f, static_cast<Eigen::Index>(fitted.size() - own.size()), se, c);
     const auto& candidate_residuals = cache.at(c.model);
     c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - base_full;
     const std::vector<double> by_experiment = experiment_log_likelihoods(candidate_residuals);
@@ -265,33 +228,22 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   std::stable_sort(d.candidates.begin(), d.candidates.end(), [&](const Candidate& a, const Candidate& b) {
     return a.significant != b.significant ? a.significant : a.delta_bic < b.delta_bic;
   });
-  // The signature rule for the pair a Gaussian likelihood cannot separate: the one the tails
-  // speak against moves to just below the other (the rest of the order stands).
-  auto at = [&](const std::string& n) {
-    return std::find_if(d.candidates.begin(), d.candidates.end(),
-                        [&](const Candidate& c) { return c.effect == n; });
-  };
-  auto bumps = at("bumps"), level = at(kWheelNoiseLevel);
-  if (bumps != d.candidates.end() && level != d.candidates.end() && bumps->significant &&
-      level->significant) {
-    const bool bumps_first = bumps < level;
-    if (d.heavy_tails != bumps_first) {
-      auto loser = d.heavy_tails ? level : bumps;
-      auto winner = d.heavy_tails ? bumps : level;
-      std::rotate(loser, loser + 1, winner + 1);  // loser now sits right after the winner
-    }
-  }
+  apply_tail_rule(d.candidates, d.heavy_tails);
   if (!d.candidates.empty() && d.candidates.front().significant) {
     d.best = 0;
     // The model to adopt: everything refitted by its part of the likelihood, now that the new
     // effect is in (the earlier effects were sized without it).
     Candidate& best = d.candidates.front();
     best.model = refit(suite, best.model, progress, path, cache);
-    if (best.effect == kWheelNoiseLevel) {
-      best.values = {best.model.robot.noise.k_left, best.model.robot.noise.k_right};
+    if (find_candidate(best.effect)->robot) {
+      for (std::size_t i = 0; i < best.parameters.size(); ++i) {
+        for (const RobotParameter& p : robot_parameters()) {
+          if (p.name == best.parameters[i]) best.values[i] = p.ref(best.model.robot);
+        }
+      }
     } else {
       for (const EffectSpec& e : best.model.effects) {
-        if (e.name == best.effect) best.values = e.values;  // bumps: sigma stays, rate refitted
+        if (e.name == best.effect) best.values = e.values;  // completed ones stay, fitted ones refitted
       }
     }
   }
@@ -307,16 +259,9 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
 }
 
 std::string explain(const Candidate& c) {
-  std::string text;
-  std::string signature;
-  if (c.effect == kWheelNoiseLevel) {
-    text = "wheel noise at another level than the model's: ";
-    signature = "variance off in every experiment, growing with distance as wheel noise does";
-  } else {
-    const EffectInfo* info = find_effect(c.effect);
-    text = info->physics + ": ";
-    signature = info->signature;
-  }
+  const CandidateType& type = *find_candidate(c.effect);
+  std::string text = type.physics + ": ";
+  const std::string& signature = type.signature;
   for (std::size_t i = 0; i < c.parameters.size(); ++i) {
     text += (i ? ", " : "") + c.parameters[i] + " = " + format_number(c.values[i], "%.6g");
     if (std::isfinite(c.stderrs[i])) text += " +/- " + format_number(c.stderrs[i], "%.1g");
@@ -365,10 +310,13 @@ std::string verdict_text(const Diagnosis& d) {
 }
 
 std::string candidate_yaml(const Candidate& c, const SuiteModel& model) {
-  if (c.effect == kWheelNoiseLevel) {
+  if (find_candidate(c.effect)->robot) {
     Robot robot = model.robot;
-    robot.noise.k_left = c.values[0];
-    robot.noise.k_right = c.values[1];
+    for (std::size_t i = 0; i < c.parameters.size(); ++i) {
+      for (const RobotParameter& p : robot_parameters()) {
+        if (p.name == c.parameters[i]) p.ref(robot) = c.values[i];
+      }
+    }
     return robot_yaml(robot);
   }
   for (const EffectSpec& e : c.model.effects) {

@@ -15,6 +15,15 @@
 
 namespace odomcov {
 
+/// A robot parameter a fit can move ("k_left", "k_right", "wheelbase"): where it lives and its
+/// coordinate (src/effects/candidates.cpp, beside the effects' own parameters).
+struct RobotParameter {
+  std::string name;
+  double& (*ref)(Robot& robot);
+  FitCoordinate (*coordinate)(const Robot& robot);
+};
+const std::vector<RobotParameter>& robot_parameters();
+
 /// Names a fit can take: "k_left", "k_right", "wheelbase" (the nominal one, which the odometry
 /// uses) and "<effect>.<parameter>" for any catalogue effect. An effect not yet in the model is
 /// added, starting from its typical size. Returns "" or what is wrong.

@@ -21,6 +21,28 @@ namespace odomcov {
 /// The candidate that refits the robot's wheel noise constants instead of adding an effect.
 inline constexpr const char* kWheelNoiseLevel = "wheel_noise_level";
 
+/// One kind of diagnose candidate: every catalogue effect (from its EffectInfo) and the robot
+/// candidates (wheel_noise_level), all described in src/effects/ so that diagnose holds no
+/// effect's name.
+struct CandidateType {
+  std::string name;
+  std::string physics, signature;  // plain words (EffectInfo)
+  bool systematic = false;         // judged on the full likelihood, else on its scatter part
+  bool heavy_tails = false;
+  /// The fit names it moves: "<effect>.<parameter>", or robot parameters ("k_left").
+  std::vector<std::string> fitted;
+  /// True when every fitted parameter's "no effect" value is the closed edge of its range (the
+  /// LRT is then a 50:50 chi^2 mixture [Self87]).
+  bool on_boundary = false;
+  bool robot = false;  // moves robot parameters (its YAML is the robot line), not an effect
+  std::string confused_with;         // EffectInfo::confused_with
+  CandidateCompletion complete = nullptr;
+};
+/// Every candidate kind: the catalogue's effects in registry order, then the robot candidates.
+const std::vector<CandidateType>& candidate_types();
+/// nullptr when unknown.
+const CandidateType* find_candidate(const std::string& name);
+
 /// Family-wise level of diagnose's decision: the best candidate must have p < alpha/m over the
 /// m candidates (Bonferroni). 0.01 keeps false alarms near 1% while finding moderate effects.
 inline constexpr double kDiagnoseAlpha = 0.01;

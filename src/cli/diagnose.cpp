@@ -37,7 +37,7 @@ json values_json(const Candidate& c, const std::vector<double>& values) {
 int run_diagnose(const DiagnoseOptions& opt) {
   check_alpha(opt.alpha);
   for (const std::string& e : opt.effects) {
-    if (e != kWheelNoiseLevel && !find_effect(e)) throw UsageError("--effects: unknown effect '" + e + "'");
+    if (!find_candidate(e)) throw UsageError("--effects: unknown effect '" + e + "'");
   }
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
