@@ -122,5 +122,33 @@ TEST(FastPath, DiagnoseMatchesExact) {
   EXPECT_NEAR(fast.after.log_likelihood, exact.after.log_likelihood, kLogLikelihoodTolerance);
 }
 
+TEST(FastPath, EveryRegisteredParameterHasAFitCoordinateAndEveryEffectACandidate) {
+  // From the registry: a new effect is covered without touching this test.
+  for (const EffectInfo& e : effect_catalogue()) {
+    const CandidateType* c = find_candidate(e.name);
+    ASSERT_NE(c, nullptr) << e.name;
+    EXPECT_FALSE(c->fitted.empty()) << e.name;
+    EXPECT_EQ(c->systematic, e.systematic) << e.name;
+    for (const EffectParameterInfo& p : e.parameters) {
+      EXPECT_EQ(check_fit_parameter(e.name + "." + p.name), "") << e.name << "." << p.name;
+      const FitCoordinate f = fit_coordinate(p);
+      EXPECT_LT(f.lower_u, f.upper_u) << p.name;
+      EXPECT_GT(f.step_u, 0.0) << p.name;
+      // The typical size lies strictly inside the box the optimiser sees.
+      double u = p.typical;
+      switch (f.transform) {
+        case FitCoordinate::Transform::log: u = std::log(p.typical); break;
+        case FitCoordinate::Transform::atanh: u = std::atanh((p.typical - f.mid) / f.half); break;
+        case FitCoordinate::Transform::sqrt: u = std::sqrt(p.typical); break;
+        case FitCoordinate::Transform::identity: break;
+      }
+      EXPECT_GT(u, f.lower_u) << e.name << "." << p.name;
+      EXPECT_LT(u, f.upper_u) << e.name << "." << p.name;
+      if (p.lower <= -1e300) EXPECT_EQ(f.transform, FitCoordinate::Transform::identity) << p.name;
+    }
+  }
+  for (const RobotParameter& p : robot_parameters()) EXPECT_EQ(check_fit_parameter(p.name), "");
+}
+
 }  // namespace
 }  // namespace odomcov
