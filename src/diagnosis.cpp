@@ -234,7 +234,11 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     // The model to adopt: everything refitted by its part of the likelihood, now that the new
     // effect is in (the earlier effects were sized without it).
     Candidate& best = d.candidates.front();
-    best.model = refit(suite, best.model, progress, path, cache);
+    // (When every effect is of the candidate's kind and nothing was completed after its fit,
+    // the candidate's own fit was already that refit: all of them jointly on its likelihood.)
+    bool other_kind = find_candidate(best.effect)->complete != nullptr;
+    for (const EffectSpec& e : best.model.effects) other_kind = other_kind || systematic(e.name) != best.systematic;
+    if (other_kind) best.model = refit(suite, best.model, progress, path, cache);
     if (find_candidate(best.effect)->robot) {
       for (std::size_t i = 0; i < best.parameters.size(); ++i) {
         for (const RobotParameter& p : robot_parameters()) {
