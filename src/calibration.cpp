@@ -334,6 +334,19 @@ class Surrogate {
     first_offset_[k] = o1;
   }
 
+  /// Parameter k's slope from one point at offset o, its curvature (and every cross term) taken
+  /// from `near`, a surrogate anchored close by: the curvature changes by the third derivative
+  /// times the distance, so the slope's error is that times o/2.
+  void set_axis_from(std::size_t k, double o, const Residuals& f, const Surrogate& near) {
+    const std::vector<RunVector> y = flat(f);
+    curvature_[k] = near.curvature_[k];
+    slope_[k].resize(y0_.size());
+    for (std::size_t i = 0; i < y0_.size(); ++i) {
+      slope_[k][i] = (y[i] - y0_[i]) / o - 0.5 * o * curvature_[k][i];
+    }
+    pairs_ = near.pairs_;
+  }
+
   /// The cross term of k and l from the value at both their first offsets (set_axis first).
   void set_pair(std::size_t k, std::size_t l, const Residuals& f) {
     const std::vector<RunVector> y = flat(f);
@@ -408,8 +421,17 @@ std::pair<double, double> axis_offsets(const Handle& h, double v) {
 /// one per pair, all from the cache.
 Surrogate anchor_at(const SuiteModel& model, const std::vector<Handle>& handles,
                     const std::vector<double>& v, ResidualCache& cache,
-                    std::atomic<std::int64_t>* counter) {
+                    std::atomic<std::int64_t>* counter, const Surrogate* near = nullptr) {
   Surrogate s(cache.at(model, counter), v);
+  if (near) {  // a re-anchor: one point per parameter, curvatures from the previous anchor
+    for (std::size_t k = 0; k < handles.size(); ++k) {
+      const double o = axis_offsets(handles[k], v[k]).second > 0 ? handles[k].fd_step(v[k]) : -handles[k].fd_step(v[k]);
+      SuiteModel m = model;
+      handles[k].ref(m) = v[k] + o;
+      s.set_axis_from(k, o, cache.at(m, counter), *near);
+    }
+    return s;
+  }
   std::vector<double> first(handles.size());
   for (std::size_t k = 0; k < handles.size(); ++k) {
     const auto [o1, o2] = axis_offsets(handles[k], v[k]);
@@ -471,7 +493,7 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
     // optimum: re-anchoring there would gain no more than the surrogate's error.
     if (gain < kFitTolerance || matched) break;
     apply(model, handles, u.data());
-    s = anchor_at(model, handles, values(u), cache, counter);
+    s = anchor_at(model, handles, values(u), cache, counter, &s);
   }
   out.anchors = std::min(out.anchors, kMaxAnchors);
   out.log_likelihood_after = ll;
