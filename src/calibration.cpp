@@ -543,8 +543,8 @@ std::string check_fit_parameter(const std::string& name) {
   const std::size_t dot = name.find('.');
   if (dot == std::string::npos) {
     std::string names;
-    for (const RobotParameter& p : robot_parameters()) names += p.name + ", ";
-    return "unknown parameter '" + name + "' (use " + names + "or <effect>.<parameter>)";
+    for (const RobotParameter& p : robot_parameters()) names += (names.empty() ? "" : ", ") + p.name;
+    return "unknown parameter '" + name + "' (use " + names + " or <effect>.<parameter>)";
   }
   const EffectInfo* info = find_effect(name.substr(0, dot));
   if (!info) return "unknown effect in '" + name + "'";
