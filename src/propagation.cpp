@@ -107,8 +107,8 @@ Complex damped_minus_undamped(double a, double delta) {
 /// heading variance V0 + dV u and noise intensity n along the piece,
 ///   e^{i theta0} [ int_0^1 e^{i a u} e^{-(V0 + dV u)/2} du (d + i n_td/2) - int_0^1 e^{i a u} du d ]
 /// written as e^{-V0/2} D drive - U d = expm1(-V0/2) D drive + (D - U) drive + U (i n_td/2),
-/// so nothing cancels when the variances are small.
-Complex noise_mean_of_piece(double heading, double d, double a, double v0, double dv,
+/// so nothing cancels when the variances are small. `rotation` is e^{i theta0}.
+Complex noise_mean_of_piece(Complex rotation, double d, double a, double v0, double dv,
                             double n_td) {
   // U = int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2)
   const double sinc_half = series::sinc(0.5 * a);
@@ -116,7 +116,7 @@ Complex noise_mean_of_piece(double heading, double d, double a, double v0, doubl
   const Complex extra = damped_minus_undamped(a, -0.5 * dv);  // D - U
   const Complex damped = undamped + extra;
   const Complex drive(d, 0.5 * n_td);
-  return std::polar(1.0, heading) * (std::expm1(-0.5 * v0) * damped * drive + extra * drive +
+  return rotation * (std::expm1(-0.5 * v0) * damped * drive + extra * drive +
                                      undamped * Complex(0.0, 0.5 * n_td));
 }
 
@@ -131,7 +131,7 @@ Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
     const ArcSegment seg = path.interval(i);
     const double a = seg.heading_change_rad(B);
     const Matrix2 n = wheel_noise_intensity(seg, B, robot.noise);
-    mean += noise_mean_of_piece(heading, seg.center_m(), a, variance, n(0, 0), n(0, 1));
+    mean += noise_mean_of_piece(std::polar(1.0, heading), seg.center_m(), a, variance, n(0, 0), n(0, 1));
     heading += a;
     variance += n(0, 0);
   }
@@ -266,8 +266,13 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
       P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
       C = phi * C + A;
     }
-    noise_mean += noise_mean_of_piece(true_pose.z(), d, a, v0, P(2, 2) - v0, r.intensity(0, 1));
-    true_pose = compose(true_pose, arc_displacement(d, a));
+    // One cosine and sine of the heading serve the noise-induced mean and the pose update
+    // (compose's own arithmetic, inlined).
+    const double cos_h = std::cos(true_pose.z()), sin_h = std::sin(true_pose.z());
+    noise_mean += noise_mean_of_piece(Complex(cos_h, sin_h), d, a, v0, P(2, 2) - v0, r.intensity(0, 1));
+    const Vector3 step = arc_displacement(d, a);
+    true_pose = {true_pose.x() + cos_h * step.x() - sin_h * step.y(),
+                 true_pose.y() + sin_h * step.x() + cos_h * step.y(), true_pose.z() + step.z()};
     odometry = drive(odometry, r.encoder, B);
     if constexpr (!std::is_same_v<std::decay_t<Each>, std::nullptr_t>) {
       each(Prediction{pose_error(true_pose, odometry), {noise_mean.real(), noise_mean.imag(), 0.0},
