@@ -74,7 +74,8 @@ void BM_DiagnoseRound(benchmark::State& state) {
   for (auto _ : state) {
     odomcov::DiagnoseProgress progress;
     const odomcov::Diagnosis d =
-        odomcov::diagnose(suite, model, odomcov::kDiagnoseAlpha, {}, &progress, path_of(state));
+        odomcov::diagnose(suite, model, odomcov::kDiagnoseAlpha, {}, &progress, {},
+                          path_of(state));
     benchmark::DoNotOptimize(d.after.nees_mean);
     propagations = static_cast<double>(progress.evaluations.load());
     state.counters["nees_after"] = d.after.nees_mean;

@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "odomcov/config.hpp"
+#include "odomcov/propagation.hpp"
 #include "odomcov/simulator.hpp"
 
 namespace {
@@ -60,6 +61,70 @@ void BM_SimulatorGeneral(benchmark::State& state) {
 }
 
 BENCHMARK(BM_SimulatorGeneral)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+// A custom effect (muparser expressions) against none, on the configs/effects/speed_scale.yaml
+// path (35 s at 50 Hz: lines at three speeds, a spin, an arc, a reversal), on every core.
+// Arg 0: no effect; 1: the speed-dependent scale of that config (factors per leg of equal
+// samples); 2: a scale that depends on the distance travelled, s (factors per sample, so the
+// legs are single samples). The expressions are evaluated when the simulator is built, never
+// per run: the per-run cost is that of the legs they give.
+odomcov::EffectList custom_variant(int variant) {
+  if (variant == 0) return {};
+  odomcov::CustomEffect def;
+  def.name = "bench";
+  def.parameters = {"a"};
+  def.scale.text = variant == 1 ? "1 + a * (v - 0.4)" : "1 + a * min(s, 5)";
+  return {odomcov::define_custom_effect(def, {0.02})};
+}
+
+void BM_SimulatorCustom(benchmark::State& state) {
+  static const odomcov::Config c =
+      odomcov::load_config(ODOMCOV_SOURCE_DIR "/configs/effects/speed_scale.yaml");
+  const odomcov::Simulator sim(c.world_robot(), c.path, custom_variant(static_cast<int>(state.range(0))));
+  const int threads = static_cast<int>(std::thread::hardware_concurrency());
+  const std::int64_t runs = 2048;
+  sim.simulate(runs, 1, threads);  // warm the thread pool
+  std::uint64_t seed = 1;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(sim.simulate(runs, seed++, threads).mean());
+  }
+  const double steps = static_cast<double>(runs * sim.samples_per_run());
+  state.counters["steps/s"] =
+      benchmark::Counter(steps, benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["threads"] = threads;
+  state.SetLabel(state.range(0) == 0 ? "no effect" : state.range(0) == 1 ? "custom, speed" : "custom, distance");
+}
+
+BENCHMARK(BM_SimulatorCustom)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+// Building the simulator (the expressions evaluated once per leg or sample of the path), and
+// the model side (resolve + first-order propagation, what every likelihood evaluation does per
+// experiment), for the same three variants.
+void BM_SimulatorBuildCustom(benchmark::State& state) {
+  static const odomcov::Config c =
+      odomcov::load_config(ODOMCOV_SOURCE_DIR "/configs/effects/speed_scale.yaml");
+  const odomcov::EffectList effects = custom_variant(static_cast<int>(state.range(0)));
+  for (auto _ : state) {
+    const odomcov::Simulator sim(c.world_robot(), c.path, effects);
+    benchmark::DoNotOptimize(sim.samples_per_run());
+  }
+}
+
+BENCHMARK(BM_SimulatorBuildCustom)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
+
+void BM_PredictCustom(benchmark::State& state) {
+  static const odomcov::Config c =
+      odomcov::load_config(ODOMCOV_SOURCE_DIR "/configs/effects/speed_scale.yaml");
+  std::vector<double> durations;
+  const auto pieces = odomcov::model_pieces(c.path, c.robot.wheelbase_m, &durations);
+  const odomcov::EffectList effects = custom_variant(static_cast<int>(state.range(0)));
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(odomcov::predict(pieces, durations, c.robot, effects).cov);
+  }
+  state.counters["pieces"] = static_cast<double>(pieces.size());
+}
+
+BENCHMARK(BM_PredictCustom)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

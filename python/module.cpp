@@ -16,6 +16,7 @@
 #include "odomcov/statistics.hpp"
 #include "odomcov/suite.hpp"
 #include "odomcov/validation.hpp"
+#include "failures.hpp"  // src/cli: the failures in words
 
 namespace py = pybind11;
 using namespace odomcov;
@@ -37,17 +38,26 @@ EffectList effects_from_python(const py::object& obj) {
       if (!info) throw py::value_error("unknown effect '" + name + "'");
       const py::dict params = py::reinterpret_borrow<py::dict>(value);
       EffectSpec spec{name, {}};
+      if (info->grouped) {  // group_variation: {"parameter": "wheelbase_error.Eb", "sd": ...}
+        if (!params.contains("parameter")) throw py::value_error(name + ".parameter: missing parameter");
+        spec.target = py::str(params["parameter"]);
+      }
       for (const EffectParameterInfo& p : info->parameters) {
         if (!params.contains(p.name.c_str())) {
           throw py::value_error(name + "." + p.name + ": missing parameter");
         }
         spec.values.push_back(params[p.name.c_str()].cast<double>());
       }
-      if (params.size() != info->parameters.size()) throw py::value_error(name + ": unknown parameter");
+      if (params.size() != info->parameters.size() + (info->grouped ? 1 : 0)) {
+        throw py::value_error(name + ": unknown parameter");
+      }
       const std::string problem = check_effect(spec);
       if (!problem.empty()) throw py::value_error(name + ": " + problem);
       list.push_back(spec);
     }
+  }
+  if (const std::string problem = check_group_target(list); !problem.empty()) {
+    throw py::value_error(std::string(kGroupVariation) + ": " + problem);
   }
   return list;
 }
@@ -226,7 +236,7 @@ py::dict compare_py(const Suite& suite, double alpha) {
   out["kurtosis"] = test_dict(c.kurtosis);
   out["log_likelihood"] = c.log_likelihood;
   out["verdict"] = c.verdict.name();
-  out["failures"] = c.failures;
+  out["failures"] = cli::failure_texts(c);
   return out;
 }
 

@@ -12,7 +12,8 @@ sysroot="$out/sysroot"
 
 host_packages=(g++-aarch64-linux-gnu qemu-user)
 arm_packages=(libtbb-dev libtbb12 libtbbmalloc2 libtbbbind-2-5 libhwloc15 libyaml-cpp-dev libyaml-cpp0.7
-              libnlopt-dev libnlopt-cxx-dev libnlopt-cxx0 libnlopt0 libgtest-dev libgmock-dev)
+              libnlopt-dev libnlopt-cxx-dev libnlopt-cxx0 libnlopt0 libmuparser-dev libmuparser2v5
+              libgtest-dev libgmock-dev)
 
 sudo_cmd=()
 [ "$(id -u)" -eq 0 ] || sudo_cmd=(sudo)

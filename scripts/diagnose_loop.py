@@ -22,31 +22,52 @@ to OUT/loop.json.
 
 With --holdout, a second suite of other runs (not used by the loop) is compared with the model
 as it was, with the model the loop built and with the joint fit (OUT/holdout.yaml): does what
-was learnt on some runs predict the others?
+was learnt on some runs predict the others? With --train REGEX (and optionally --test REGEX) one
+suite is split instead: the loop runs on the experiments whose names match --train, and its
+models are judged on those matching --test (default: every other experiment). E.g. the path-type
+hold-out of OptiOdom is --train '^(square|ivanjko)-' --test '^(circular|free)-', a campaign
+hold-out --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'.
+
+Every compare is also summarised per path type, the experiment name's prefix before the first
+'-' (square-..., circular-...): the pooled NEES per run (3 when the model is right), and the
+within-experiment NEES, the scatter of the runs about their own experiment's mean against the
+predicted covariance (3 when the predicted spread is right whatever the mean misfit; well below
+3 means the model's random noise is larger than the runs' own scatter supports).
 
 Usage:
-  diagnose_loop.py --odomcov BIN SUITE.yaml --out DIR [--rounds N] [--holdout SUITE.yaml]
+  diagnose_loop.py --odomcov BIN SUITE.yaml --out DIR [--rounds N] [--order 1|2]
+                   [--candidates FILE.yaml] [--holdout SUITE.yaml | --train REGEX [--test REGEX]]
+  diagnose_loop.py --odomcov BIN SUITE.yaml --out DIR --render   (the report again, no odomcov run)
 """
 import argparse
 import json
+import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 
+import numpy
+
 NOISE_LEVEL = "wheel_noise_level"
-# The parameters `fit` refines for each named effect. Bumps fit their rate only: sigma is fixed
-# by the tails (the fourth cumulant) when diagnose names them.
+# The parameters `fit` refines for an effect whose name does not prefix them (effect.param, the
+# default for every other effect, the second catalogue's and custom ones included). Bumps fit
+# their rate only: sigma is fixed by the tails (the fourth cumulant) when diagnose names them.
 FIT_PARAMS = {
-    "wheel_diameter_ratio": ["wheel_diameter_ratio.Ed"],
-    "wheelbase_error": ["wheelbase_error.Eb"],
-    "scale_error": ["scale_error.Es"],
-    "wheel_noise_correlation": ["wheel_noise_correlation.rho"],
-    "turn_slip": ["turn_slip.k"],
-    "per_run_radius": ["per_run_radius.sigma"],
     "bumps": ["bumps.rate"],
     NOISE_LEVEL: ["k_left", "k_right"],
 }
+
+
+def fit_params(effect, parameters):
+    """The `fit --params` names of a named effect with these parameters."""
+    return FIT_PARAMS.get(effect, [f"{effect}.{p}" for p in parameters])
+
+
+def path_type(name):
+    """An experiment's path type: its name's prefix before the first '-'."""
+    return name.split("-", 1)[0]
 
 
 def run(cmd):
@@ -104,69 +125,221 @@ def set_model(suite, yaml_text):
         f.write("\n".join(lines) + "\n")
 
 
-def compare(odomcov, suite, report):
-    """`odomcov compare` in brief: log-likelihood, pooled NEES, experiments consistent."""
-    run([odomcov, "compare", suite, "--json", report])
+def _within(e):
+    """(sum over runs of (e_i - mean)' P^-1 (e_i - mean), its degrees of freedom 3 (n - 1)):
+    the runs' scatter about their own mean against the predicted covariance P."""
+    errors = numpy.array(e["errors"], dtype=float)
+    if len(errors) < 2:
+        return 0.0, 0
+    d = errors - errors.mean(axis=0)
+    cov = numpy.array(e["predicted"]["cov"], dtype=float)
+    try:
+        q = numpy.linalg.solve(cov, d.T)
+    except numpy.linalg.LinAlgError:
+        return 0.0, 0
+    return float((d.T * q).sum()), 3 * (len(errors) - 1)
+
+
+def heading_z(e):
+    """The experiment's heading-mean misfit in standard errors of its mean, (measured -
+    predicted) / sqrt(P_theta,theta / n), and the turn sense its name ends with (+1 '-ccw',
+    -1 '-cw', else 0)."""
+    var = e["predicted"]["cov"][2][2] / e["n"]
+    z = (e["measured"]["mean"][2] - e["predicted"]["mean"][2]) / math.sqrt(var) if var > 0 else 0.0
+    sense = 1 if e["name"].endswith("-ccw") else -1 if e["name"].endswith("-cw") else 0
+    return z, sense
+
+
+def by_type(experiments):
+    """Per path type: runs, experiments, consistent ones, the pooled NEES per run, the
+    within-experiment NEES (3 when the predicted spread matches the runs' own scatter), and the
+    heading-mean misfits in standard errors: their RMS (1 when the model is right) and their mean
+    signed by the turn sense (0 when no heading bias is left)."""
+    out = {}
+    for e in experiments:
+        t = out.setdefault(path_type(e["name"]), {"runs": 0, "experiments": 0, "consistent": 0,
+                                                 "nees": 0.0, "_within": 0.0, "_dof": 0,
+                                                 "_z": [], "_signed": []})
+        t["runs"] += e["n"]
+        t["experiments"] += 1
+        t["consistent"] += e["verdict"] == "consistent"
+        t["nees"] += e["nees_mean"] * e["n"]
+        q, dof = _within(e)
+        t["_within"] += q
+        t["_dof"] += dof
+        z, sense = heading_z(e)
+        t["_z"].append(z)
+        if sense:
+            t["_signed"].append(z * sense)
+    for t in out.values():
+        t["nees"] /= t["runs"]
+        t["nees_within"] = 3 * t.pop("_within") / t["_dof"] if t["_dof"] else None
+        t.pop("_dof")
+        z, signed = t.pop("_z"), t.pop("_signed")
+        t["heading_z_rms"] = math.sqrt(sum(v * v for v in z) / len(z))
+        t["heading_z_signed_mean"] = sum(signed) / len(signed) if signed else None
+    return dict(sorted(out.items()))
+
+
+def compare(odomcov, suite, report, order=None):
+    """`odomcov compare` in brief (summarise)."""
+    run([odomcov, "compare", suite, "--json", report] + order_args(order))
+    return summarise(report)
+
+
+def summarise(report):
+    """A compare JSON in brief: log-likelihood, pooled NEES, experiments consistent, and the
+    same per path type."""
     with open(report) as f:
         c = json.load(f)
     runs = sum(e["n"] for e in c["experiments"])
+    within = [_within(e) for e in c["experiments"]]
+    within_dof = sum(dof for _, dof in within)
     return {"log_likelihood": c["log_likelihood"],
             "nees_mean": sum(e["nees_mean"] * e["n"] for e in c["experiments"]) / runs,
+            "nees_within": 3 * sum(q for q, _ in within) / within_dof if within_dof else None,
             "verdict": c["verdict"], "experiments": len(c["experiments"]),
-            "consistent_experiments": sum(e["verdict"] == "consistent" for e in c["experiments"])}
+            "consistent_experiments": sum(e["verdict"] == "consistent" for e in c["experiments"]),
+            "by_type": by_type(c["experiments"])}
 
 
-def loop(odomcov, suite, out, rounds):
+def _candidates(d):
+    """Every candidate of a diagnose round in brief, best first."""
+    return [{k: c.get(k) for k in ("effect", "parameters", "stderr", "delta_log_likelihood",
+                                   "likelihood", "p_value")} for c in d["candidates"]]
+
+
+def _round_of(round_, d):
+    """One round's entry of the report from its diagnose JSON."""
+    entry = _round_fields(round_, d)
+    entry["candidates"] = _candidates(d)
+    return entry
+
+
+def _round_fields(round_, d):
+    if d["best"] is None:
+        return {"round": round_, "named": None, "before": d["before"], "explained": d.get("explained")}
+    best = d["best"]["effect"]
+    candidate = next(c for c in d["candidates"] if c["effect"] == best)
+    return {"round": round_, "named": best, "parameters": d["best"]["parameters"],
+            "stderr": candidate["stderr"], "p_value": candidate["p_value"],
+            "delta_log_likelihood": candidate["delta_log_likelihood"],
+            "likelihood": candidate.get("likelihood"), "before": d["before"], "after": d["after"],
+            "explanation": candidate.get("explanation"), "explained": d.get("explained")}
+
+
+def _verdict_of(report, d):
+    report["explained"] = d.get("explained")
+    report["alpha"] = d.get("alpha", 0.01)
+    report["odometry_correction"] = d.get("odometry_correction")
+    report["residuals"] = d.get("residuals")
+
+
+def rebuild(out):
+    """The report of a loop from the files it left in `out`, also of one that was stopped
+    before it ended (its loop.json is written last): the rounds done so far."""
+    report = {"suite": os.path.join(out, "suite.yaml"), "rounds": [], "fit": None,
+              "compare_rounds": [os.path.join(out, "compare-before.json")], "partial": True}
+    round_ = 0
+    while os.path.exists(os.path.join(out, f"diagnose-{round_}.json")):
+        with open(os.path.join(out, f"diagnose-{round_}.json")) as f:
+            d = json.load(f)
+        _verdict_of(report, d)
+        report["rounds"].append(_round_of(round_, d))
+        compared = os.path.join(out, f"compare-round-{round_ + 1}.json")
+        if d["best"] is not None and os.path.exists(compared):
+            report["compare_rounds"].append(compared)
+        round_ += 1
+    if os.path.exists(os.path.join(out, "fit.json")):
+        with open(os.path.join(out, "fit.json")) as f:
+            report["fit"] = json.load(f)
+    if not os.path.exists(os.path.join(out, "compare-after.json")):
+        shutil.copy(report["compare_rounds"][-1], os.path.join(out, "compare-after.json"))
+    return report
+
+
+def resummarise(report, out):
+    """Re-reads every compare JSON a finished loop left in `out` (after this script's summary
+    changed: no odomcov run)."""
+    def again(name):
+        path = os.path.join(out, name)
+        return summarise(path) if os.path.exists(path) else None
+    report["compare_before"] = again("compare-before.json")
+    report["compare_after"] = again("compare-after.json")
+    report["compare_fit"] = again("compare-fit.json")
+    for s in report["rounds"]:
+        if s["named"]:
+            s["compare"] = again(f"compare-round-{s['round'] + 1}.json")
+        path = os.path.join(out, f"diagnose-{s['round']}.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                s["candidates"] = _candidates(json.load(f))
+    held = report.get("holdout")
+    if held:
+        for key in ("compare_after", "compare_fit"):
+            if again(f"holdout-{key}.json"):
+                held[key] = again(f"holdout-{key}.json")
+        held["compare_before"] = again("holdout-before.json")
+    return report
+
+
+def order_args(order):
+    return ["--order", str(order)] if order else []
+
+
+def diagnose_args(candidates, order):
+    """Extra `diagnose` options: --candidates FILE (user hypotheses ranked beside the catalogue)
+    only when given, so the loop runs with any odomcov; and the model order."""
+    return (["--candidates", candidates] if candidates else []) + order_args(order)
+
+
+def loop(odomcov, suite, out, rounds, candidates=None, order=None):
     """Runs the loop on a copy of `suite` in `out`. Returns a report: the rounds, `compare`
     before, with the loop's model and with the joint fit, and the fit itself."""
     os.makedirs(out, exist_ok=True)
     work = os.path.join(out, "suite.yaml")
     copy_suite(suite, work)
-    report = {"suite": suite, "compare_before": compare(odomcov, work, os.path.join(out, "compare-before.json")),
+    report = {"suite": suite, "order": order, "candidates": candidates,
+              "compare_before": compare(odomcov, work, os.path.join(out, "compare-before.json"), order),
               "rounds": [], "fit": None, "compare_fit": None,
               "compare_rounds": [os.path.join(out, "compare-before.json")]}
     named = []
     for round_ in range(rounds):
         path = os.path.join(out, f"diagnose-{round_}.json")
         progress(f"diagnose loop: round {round_ + 1} of at most {rounds} "
-                 f"({len(named)} named so far{': ' + ', '.join(named) if named else ''})")
-        run([odomcov, "diagnose", work, "--json", path])
+                 f"({len(named)} named so far{': ' + ', '.join(n for n, _ in named) if named else ''})")
+        run([odomcov, "diagnose", work, "--json", path] + diagnose_args(candidates, order))
         with open(path) as f:
             d = json.load(f)
-        report["explained"] = d.get("explained")
-        report["alpha"] = d.get("alpha", 0.01)
-        report["odometry_correction"] = d.get("odometry_correction")
-        report["residuals"] = d.get("residuals")
+        _verdict_of(report, d)
+        report["rounds"].append(_round_of(round_, d))
         if d["best"] is None:
-            report["rounds"].append({"round": round_, "named": None, "before": d["before"],
-                                     "explained": d.get("explained")})
             break
         best = d["best"]["effect"]
-        candidate = next(c for c in d["candidates"] if c["effect"] == best)
-        report["rounds"].append({
-            "round": round_, "named": best, "parameters": d["best"]["parameters"],
-            "stderr": candidate["stderr"], "p_value": candidate["p_value"],
-            "delta_log_likelihood": candidate["delta_log_likelihood"],
-            "likelihood": candidate["likelihood"], "before": d["before"], "after": d["after"],
-            "explanation": candidate["explanation"], "explained": d.get("explained")})
-        named.append(best)
+        named.append((best, list(d["best"]["parameters"])))
         set_model(work, d["after"]["yaml"])
         # The compare of each round's model, for scripts/plot_loop.py.
         path = os.path.join(out, f"compare-round-{round_ + 1}.json")
-        compare(odomcov, work, path)
+        report["rounds"][-1]["compare"] = compare(odomcov, work, path, order)
         report["compare_rounds"].append(path)
     progress("diagnose loop: compare and the joint fit")
-    report["compare_after"] = compare(odomcov, work, os.path.join(out, "compare-after.json"))
+    report["compare_after"] = compare(odomcov, work, os.path.join(out, "compare-after.json"), order)
     if named:
         path = os.path.join(out, "fit.json")
-        params = [p for n in named for p in FIT_PARAMS[n]]
-        run([odomcov, "fit", work, "--params", ",".join(params), "--json", path])
-        with open(path) as f:
-            report["fit"] = json.load(f)
-        fitted = os.path.join(out, "suite-fit.yaml")
-        copy_suite(work, fitted)
-        set_model(fitted, report["fit"]["yaml"])
-        report["compare_fit"] = compare(odomcov, fitted, os.path.join(out, "compare-fit.json"))
+        params = [p for effect, names in named for p in fit_params(effect, names)]
+        try:
+            run([odomcov, "fit", work, "--params", ",".join(params), "--json", path]
+                + order_args(order))
+        except RuntimeError as e:  # reported, not fatal: the loop's own model stands
+            report["fit_error"] = str(e)
+        else:
+            with open(path) as f:
+                report["fit"] = json.load(f)
+            fitted = os.path.join(out, "suite-fit.yaml")
+            copy_suite(work, fitted)
+            set_model(fitted, report["fit"]["yaml"])
+            report["compare_fit"] = compare(odomcov, fitted, os.path.join(out, "compare-fit.json"),
+                                            order)
     progress("")
     return report
 
@@ -225,6 +398,68 @@ def correction_lines(report):
     return lines
 
 
+def _nees_cell(t):
+    if t is None:
+        return ""
+    within = "" if t.get("nees_within") is None else f" ({t['nees_within']:.2f})"
+    return f"{t['nees']:.2f}{within}"
+
+
+def _heading_cell(t):
+    if t is None:
+        return ""
+    signed = t.get("heading_z_signed_mean")
+    return ("" if signed is None else f"{signed:+.2f} ") + f"({t['heading_z_rms']:.2f})"
+
+
+def type_table(rows_in, heading=False):
+    """A Markdown table per path type: rows_in is [(label, compare summary)]. Each cell is the
+    pooled NEES per run with the within-experiment NEES in brackets; with heading=True, the
+    heading-mean misfit in standard errors, mean signed by the turn sense, RMS in brackets."""
+    types = sorted({t for _, c in rows_in if c for t in c["by_type"]})
+    rows = ["| model | " + " | ".join(types) + (" |" if heading else " | pooled |"),
+            "|---|" + "---|" * (len(types) + (0 if heading else 1))]
+    cell = _heading_cell if heading else _nees_cell
+    for label, c in rows_in:
+        if not c:
+            continue
+        pooled = "" if heading else \
+            f" {_nees_cell({'nees': c['nees_mean'], 'nees_within': c.get('nees_within')})} |"
+        rows.append(f"| {label} | " + " | ".join(cell(c["by_type"].get(t)) for t in types)
+                    + " |" + pooled)
+    return rows
+
+
+HEADING_NOTE = ("Heading-mean misfit per path type, in standard errors of each experiment's mean: "
+                "mean signed by the turn sense (0 when no heading bias is left), RMS in brackets "
+                "(1 when the model is right):")
+
+
+def _round_rows(report):
+    rows = [("suite's model", report["compare_before"])]
+    rows += [(f"round {s['round'] + 1}: + {s['named']}", s.get("compare"))
+             for s in report["rounds"] if s["named"]]
+    if report.get("compare_fit"):
+        rows.append(("joint fit", report["compare_fit"]))
+    return rows
+
+
+def holdout_lines(held):
+    rows = [f"- Held-out runs ({held['suite']}) with the suite's original model: "
+            f"{summary(held['compare_before'])}.",
+            f"- Held-out runs with the loop's model: {summary(held['compare_after'])}."]
+    if "compare_fit" in held:
+        rows.append(f"- Held-out runs with the joint fit: {summary(held['compare_fit'])}.")
+    rows += ["", "NEES per run by path type on the held-out runs (within-experiment NEES in brackets):",
+             ""]
+    models = [("suite's model", held["compare_before"]), ("loop's model", held["compare_after"]),
+              ("joint fit", held.get("compare_fit"))]
+    rows += type_table(models)
+    rows += ["", HEADING_NOTE, ""]
+    rows += type_table(models, heading=True)
+    return rows
+
+
 def markdown(report):
     rows = ["| round | named | size (all effects refitted) | p-value | log-likelihood | NEES mean | verdict | explained |",
             "|---|---|---|---|---|---|---|---|"]
@@ -249,19 +484,75 @@ def markdown(report):
                            for k, v in fit["parameters"].items())
         rows.append(f"- Joint fit of everything named, full likelihood: {values}.")
         rows.append(f"- `compare` with the joint fit: {summary(report['compare_fit'])}.")
-    rows.extend(verdict_lines(report))
-    rows.extend(correction_lines(report))
+    elif report.get("fit_error"):
+        rows.append(f"- The joint fit failed: {report['fit_error']}")
+    rows += ["", "NEES per run by path type, in-sample (within-experiment NEES in brackets; 3 is right):",
+             ""]
+    rows += type_table(_round_rows(report))
+    rows += ["", HEADING_NOTE, ""]
+    rows += type_table(_round_rows(report), heading=True)
+    rows.append("")
     held = report.get("holdout")
     if held:
-        rows.append(f"- Held-out runs ({held['suite']}) with the suite's original model: "
-                    f"{summary(held['compare_before'])}.")
-        rows.append(f"- Held-out runs with the loop's model: {summary(held['compare_after'])}.")
-        if "compare_fit" in held:
-            rows.append(f"- Held-out runs with the joint fit: {summary(held['compare_fit'])}.")
+        rows.extend(holdout_lines(held))
+        rows.append("")
+    rows.extend(verdict_lines(report))
+    rows.extend(correction_lines(report))
+    if report.get("partial"):
+        rows += ["", f"(Stopped before its end: the {len(report['rounds'])} rounds done; no joint "
+                 "fit unless it was reached; held-out runs judged with the model as far as it got.)"]
     return "\n".join(rows)
 
 
-def main():
+def split_suite(suite, to, pattern, keep):
+    """Copies the experiments of `suite` whose names match `pattern` (keep=True) or do not
+    (keep=False) to `to`, with everything else in the suite; relative CSV paths made absolute.
+    Returns how many experiments it kept."""
+    copy_suite(suite, to)
+    with open(to) as f:
+        lines = f.read().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("experiments:")) + 1
+    end = next((i for i in range(start, len(lines)) if lines[i] and not lines[i][0].isspace()),
+               len(lines))
+    items, head = [], lines[:start]
+    for line in lines[start:end]:
+        if line.lstrip().startswith("- ") and (not items or _indent(line) <= _indent(items[-1][0])):
+            items.append([line])
+        elif items:
+            items[-1].append(line)
+    regex = re.compile(pattern)
+    kept = [item for item in items if bool(regex.search(_name(item))) == keep]
+    with open(to, "w") as f:
+        f.write("\n".join(head + [line for item in kept for line in item] + lines[end:]) + "\n")
+    return len(kept)
+
+
+def _indent(line):
+    return len(line) - len(line.lstrip())
+
+
+def _name(item):
+    """The name of one experiment entry (its lines)."""
+    for line in item:
+        m = re.match(r"\s*(?:- )?name:\s*[\"']?([^\"'#]*?)[\"']?\s*(?:#.*)?$", line)
+        if m:
+            return m.group(1)
+    return ""
+
+
+def judge_holdout(odomcov, held, out, order):
+    """The held-out suite `held` (already in `out`) against the suite's model, the loop's and the
+    joint fit's."""
+    report = {"suite": held, "compare_before": compare(
+        odomcov, held, os.path.join(out, "holdout-before.json"), order)}
+    for key, source in (("compare_after", "suite.yaml"), ("compare_fit", "suite-fit.yaml")):
+        if os.path.exists(os.path.join(out, source)):
+            set_model(held, model_of(os.path.join(out, source)))
+            report[key] = compare(odomcov, held, os.path.join(out, f"holdout-{key}.json"), order)
+    return report
+
+
+def parse_args():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--odomcov", required=True, metavar="BIN",
@@ -271,21 +562,67 @@ def main():
                         help="folder for the edited suite, each round's diagnose JSON and loop.json")
     parser.add_argument("--rounds", type=int, default=8,
                         help="stop after adding this many effects (default: 8)")
-    parser.add_argument("--holdout", metavar="SUITE",
-                        help="a suite of other runs: compare it with the original model and "
-                             "with the model the loop built")
+    parser.add_argument("--order", type=int, choices=[1, 2],
+                        help="model order for diagnose, compare and fit (default: odomcov's)")
+    parser.add_argument("--candidates", metavar="FILE",
+                        help="custom hypotheses (YAML) that diagnose ranks beside the catalogue")
+    held = parser.add_mutually_exclusive_group()
+    held.add_argument("--holdout", metavar="SUITE",
+                      help="a suite of other runs: compare it with the original model and "
+                           "with the model the loop built")
+    held.add_argument("--train", metavar="REGEX",
+                      help="split SUITE: the loop runs on the experiments whose names match")
+    parser.add_argument("--render", action="store_true",
+                        help="re-read the compare JSONs of a loop in --out, rewrite its loop.json "
+                             "and print its report again (no odomcov run for a finished loop; for "
+                             "one stopped early, the rounds done and the held-out compares)")
+    parser.add_argument("--test", metavar="REGEX",
+                        help="with --train: judge on the experiments whose names match "
+                             "(default: every experiment --train leaves out)")
     args = parser.parse_args()
-    report = loop(args.odomcov, args.suite, args.out, args.rounds)
-    if args.holdout:
+    if args.test and not args.train:
+        parser.error("--test needs --train")
+    return args
+
+
+def main():
+    args = parse_args()
+    if args.render:
+        path = os.path.join(args.out, "loop.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                report = json.load(f)
+        else:
+            report = rebuild(args.out)
+            held = os.path.join(args.out, "holdout.yaml")
+            if os.path.exists(held):  # judged with the model as far as the loop got
+                report["holdout"] = judge_holdout(args.odomcov, held, args.out, args.order)
+                report["holdout"]["suite"] = held
+        report = resummarise(report, args.out)
+        with open(os.path.join(args.out, "loop.json"), "w") as f:
+            json.dump(report, f, indent=1)
+        print(markdown(report))
+        return 0
+    os.makedirs(args.out, exist_ok=True)
+    suite, held = args.suite, None
+    if args.train:
+        suite = os.path.join(args.out, "train-source.yaml")
+        held = os.path.join(args.out, "holdout.yaml")
+        if split_suite(args.suite, suite, args.train, True) == 0:
+            sys.exit(f"diagnose_loop.py: --train {args.train!r} matches no experiment of {args.suite}")
+        test = (split_suite(args.suite, held, args.test, True) if args.test
+                else split_suite(args.suite, held, args.train, False))
+        if test == 0:
+            sys.exit(f"diagnose_loop.py: no experiment of {args.suite} is left to test on")
+    elif args.holdout:
         held = os.path.join(args.out, "holdout.yaml")
         copy_suite(args.holdout, held)
-        report["holdout"] = {"suite": args.holdout, "compare_before": compare(
-            args.odomcov, held, os.path.join(args.out, "holdout-before.json"))}
-        for key, source in (("compare_after", "suite.yaml"), ("compare_fit", "suite-fit.yaml")):
-            if os.path.exists(os.path.join(args.out, source)):
-                set_model(held, model_of(os.path.join(args.out, source)))
-                report["holdout"][key] = compare(args.odomcov, held,
-                                                 os.path.join(args.out, f"holdout-{key}.json"))
+    report = loop(args.odomcov, suite, args.out, args.rounds, args.candidates, args.order)
+    if args.train:
+        report["split"] = {"suite": args.suite, "train": args.train, "test": args.test}
+    if held:
+        report["holdout"] = judge_holdout(args.odomcov, held, args.out, args.order)
+        report["holdout"]["suite"] = args.holdout or f"{args.suite} ({args.test or 'not ' + args.train})"
     with open(os.path.join(args.out, "loop.json"), "w") as f:
         json.dump(report, f, indent=1)
     print(markdown(report))

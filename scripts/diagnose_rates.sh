@@ -1,22 +1,30 @@
 #!/usr/bin/env bash
-# Benchmark of `odomcov diagnose` on blind worlds (issue 7): the identification rate over a mixed
-# batch of 110 worlds (each effect alone, a wrong noise level, pairs of effects, nothing hidden)
-# and the false-alarm rate over 200 worlds with nothing hidden. Seeds are fixed, so the figures
-# in results/diagnose/ are reproducible; a few minutes on two cores. These seeds were fixed
-# after the method was final: the batches used while developing it (seeds 11, 2027, 90210,
-# 31337, 555) are not the ones reported.
+# Benchmark of `odomcov diagnose` on blind worlds (issues 7 and 10): the rates over a mixed batch
+# of 112 worlds (7 cycles of: each effect of both catalogues alone, a wrong noise level, a
+# speed-dependent scale that is in no catalogue, two pairs of effects, and two worlds with
+# nothing hidden) and the false-alarm rate over 200 worlds with nothing hidden. Seeds are fixed,
+# so the figures in results/diagnose/ are reproducible. The seeds were fixed after the method was
+# final: the batches used while developing it (seeds 11, 2027, 90210, 31337, 555) are not the
+# ones reported.
+#   scripts/diagnose_rates.sh            # both batches
+#   scripts/diagnose_rates.sh mixed      # one: mixed, none, or pilot (16 worlds, one cycle)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
 "$root/scripts/build.sh"
 out="$root/results/diagnose"
 work="$root/build/diagnose_rates"
-mkdir -p "$out"
-rm -rf "$work"
+mkdir -p "$out" "$work"
+parts=("${@:-mixed none}")
+want() { [[ " ${parts[*]} " == *" $1 "* ]]; }
 run() {  # name seed worlds cases
+  rm -rf "${work:?}/$1"
+  local start=$SECONDS
   /usr/bin/python3 "$root/scripts/diagnose_blind.py" --odomcov "$root/build/src/cli/odomcov" \
     --seed "$2" --worlds "$3" --cases "$4" --out "$work/$1" --report "$out/$1.json" > "$out/$1.txt"
+  echo "runtime: $((SECONDS - start)) s for $3 worlds on $(nproc) cores" >> "$out/$1.txt"
 }
-run mixed 20261121 110 mixed
-run none 11212026 200 none
-echo "rates in $out/mixed.txt and $out/none.txt" >&2
+if want mixed; then run mixed 20261124 112 mixed; fi
+if want none; then run none 24112026 200 none; fi
+if want pilot; then run pilot 20261125 16 mixed; fi
+echo "rates in $out/" >&2

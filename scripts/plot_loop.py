@@ -9,7 +9,10 @@ predicted 95% ellipse before (dashed) and after (solid), on the same axes.
 The path type is the experiment name's prefix before the first '-' (square-..., circular-...),
 or the first group of --group-by REGEX.
 
-Usage: plot_loop.py LOOP_DIR [--group-by REGEX] [--types N] --out FIG.png
+With --holdout (a loop run with --holdout or --train), a last row sets the held-out runs with
+the suite's model against the joint fit learnt on the other runs.
+
+Usage: plot_loop.py LOOP_DIR [--group-by REGEX] [--types N] [--holdout] --out FIG.png
 """
 import argparse
 import json
@@ -54,6 +57,43 @@ def nees_by_kind(compare, pattern):
     return {k: v[0] / v[1] for k, v in sums.items()}
 
 
+def draw_row(axes, before, after, label, kinds, pattern):
+    """One row: the NEES by path type before and after, then each path type's x-y errors with
+    the predicted 95% ellipses before (dashed) and after (solid)."""
+    ax = axes[0]
+    nb, na = nees_by_kind(before, pattern), nees_by_kind(after, pattern)
+    xs = range(len(nb))
+    ax.bar([x - 0.2 for x in xs], list(nb.values()), 0.4, label="before", color="0.7")
+    ax.bar([x + 0.2 for x in xs], [na.get(k, float("nan")) for k in nb], 0.4, label="after",
+           color="tab:blue")
+    ax.axhline(3, color="k", lw=0.8, ls=":")
+    ax.set_xticks(list(xs))
+    ax.set_xticklabels(list(nb), rotation=30, fontsize=7)
+    ax.set_yscale("log")
+    ax.set_title(f"{label}\nNEES mean by path type", fontsize=8)
+    ax.legend(fontsize=7)
+    by_name = {e["name"]: e for e in after["experiments"]}
+    for ax, k in zip(axes[1:], kinds):
+        drawn = 0
+        for e in before["experiments"]:
+            if kind_of(e["name"], pattern) != k or e["name"] not in by_name:
+                continue
+            drawn += 1
+            a = by_name[e["name"]]
+            ax.plot([p[0] for p in a["errors"]], [p[1] for p in a["errors"]], ".", ms=3, color="k")
+            ellipse(ax, e["predicted"]["mean"], e["predicted"]["cov"], color="0.5", ls="--", lw=0.8)
+            ellipse(ax, a["predicted"]["mean"], a["predicted"]["cov"], color="tab:blue", lw=0.9)
+        if not drawn:  # a path type of the other side of a hold-out
+            ax.axis("off")
+            continue
+        ax.autoscale_view()
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"{k}: x-y error [m], 95% before (dashed) / after", fontsize=8)
+        ax.tick_params(labelsize=6)
+    for ax in axes[1 + len(kinds):]:
+        ax.axis("off")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("loop", help="the --out directory of scripts/diagnose_loop.py")
@@ -61,6 +101,9 @@ def main():
                         help="regex whose first group is the path type (default: the name's "
                              "prefix before the first '-')")
     parser.add_argument("--types", type=int, default=4, help="at most this many path types drawn")
+    parser.add_argument("--holdout", action="store_true",
+                        help="add a last row: the held-out runs with the suite's model against "
+                             "the joint fit (or the loop's model) learnt on the others")
     parser.add_argument("--out", required=True, help="output image (PNG)")
     args = parser.parse_args()
     with open(os.path.join(args.loop, "loop.json")) as f:
@@ -74,46 +117,29 @@ def main():
         with open(path) as f:
             compares.append(json.load(f))
     named = [s["named"] for s in report["rounds"] if s.get("named")]
+    pairs = [(compares[r], compares[r + 1],
+              f"round {r + 1}: + {named[r] if r < len(named) else 'nothing named'}")
+             for r in range(len(compares) - 1)]
+    held = report.get("holdout")
+    if args.holdout and held:
+        after = "compare_fit" if "compare_fit" in held else "compare_after"
+        with open(os.path.join(args.loop, "holdout-before.json")) as f:
+            first = json.load(f)
+        with open(os.path.join(args.loop, f"holdout-{after}.json")) as f:
+            last = json.load(f)
+        pairs.append((first, last, "held-out runs: the suite's model → "
+                      + ("the joint fit" if after == "compare_fit" else "the loop's model")))
     kinds = []
-    for e in compares[0]["experiments"]:
-        k = kind_of(e["name"], args.group_by)
-        if k not in kinds:
-            kinds.append(k)
+    for before, _, _ in pairs:
+        for e in before["experiments"]:
+            k = kind_of(e["name"], args.group_by)
+            if k not in kinds:
+                kinds.append(k)
     kinds = kinds[:args.types]
-    rows = len(compares) - 1
-    fig, axes = plt.subplots(rows, 1 + len(kinds), figsize=(3.6 * (1 + len(kinds)), 3.4 * rows),
-                             squeeze=False)
-    for r in range(rows):
-        before, after = compares[r], compares[r + 1]
-        label = named[r] if r < len(named) else "nothing named"
-        ax = axes[r][0]
-        nb, na = nees_by_kind(before, args.group_by), nees_by_kind(after, args.group_by)
-        xs = range(len(nb))
-        ax.bar([x - 0.2 for x in xs], list(nb.values()), 0.4, label="before", color="0.7")
-        ax.bar([x + 0.2 for x in xs], [na.get(k, float("nan")) for k in nb], 0.4, label="after",
-               color="tab:blue")
-        ax.axhline(3, color="k", lw=0.8, ls=":")
-        ax.set_xticks(list(xs))
-        ax.set_xticklabels(list(nb), rotation=30, fontsize=7)
-        ax.set_yscale("log")
-        ax.set_title(f"round {r + 1}: + {label}\nNEES mean by path type", fontsize=8)
-        ax.legend(fontsize=7)
-        by_name = {e["name"]: e for e in after["experiments"]}
-        for c, k in enumerate(kinds, start=1):
-            ax = axes[r][c]
-            for e in before["experiments"]:
-                if kind_of(e["name"], args.group_by) != k or e["name"] not in by_name:
-                    continue
-                a = by_name[e["name"]]
-                xs_ = [p[0] for p in a["errors"]]
-                ys_ = [p[1] for p in a["errors"]]
-                ax.plot(xs_, ys_, ".", ms=3, color="k")
-                ellipse(ax, e["predicted"]["mean"], e["predicted"]["cov"], color="0.5", ls="--", lw=0.8)
-                ellipse(ax, a["predicted"]["mean"], a["predicted"]["cov"], color="tab:blue", lw=0.9)
-            ax.autoscale_view()
-            ax.set_aspect("equal", adjustable="datalim")
-            ax.set_title(f"{k}: x-y error [m], 95% before (dashed) / after", fontsize=8)
-            ax.tick_params(labelsize=6)
+    fig, axes = plt.subplots(len(pairs), 1 + len(kinds),
+                             figsize=(3.6 * (1 + len(kinds)), 3.4 * len(pairs)), squeeze=False)
+    for row, (before, after, label) in zip(axes, pairs):
+        draw_row(row, before, after, label, kinds, args.group_by)
     fig.tight_layout()
     fig.savefig(args.out, dpi=110)
     return 0

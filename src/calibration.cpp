@@ -4,6 +4,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <limits>
 #include <nlopt.hpp>
@@ -28,9 +29,7 @@ struct Handle : FitCoordinate {
   double fd_step(double v) const { return std::max(fd_abs, fd_rel * std::abs(v - fd_origin)); }
   double& ref(SuiteModel& m) const {
     if (robot) return robot->ref(m.robot);
-    for (EffectSpec& e : m.effects) {
-      if (e.name == effect) return e.values[index];
-    }
+    if (EffectSpec* e = find_spec(m.effects, effect)) return e->values[index];
     throw std::logic_error("fit: effect not in the model");
   }
   double to_u(double v) const {
@@ -80,7 +79,7 @@ Handle make_handle(const std::string& name, const SuiteModel& model) {
   }
   const std::size_t dot = name.find('.');
   const std::string effect = name.substr(0, dot);
-  const EffectInfo* info = find_effect(effect);
+  const EffectInfo* info = find_effect(effect, model.effects);
   const std::string param = name.substr(dot + 1);
   std::size_t index = 0;
   for (std::size_t i = 0; i < info->parameters.size(); ++i) {
@@ -146,7 +145,13 @@ double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int*
       [](const std::vector<double>& x, std::vector<double>&, void* data) {
         auto* c = static_cast<Context*>(data);
         if (c->evaluations) ++*c->evaluations;
-        return negative_sum((*c->terms)(x));
+        // No exception may cross NLopt. A custom effect's expression that is not finite at a
+        // trial point is a wall for the optimiser; at the start it was an InputError already.
+        try {
+          return negative_sum((*c->terms)(x));
+        } catch (const InputError&) {
+          return 1e300;
+        }
       },
       &context);
   double best = 0.0;
@@ -254,9 +259,12 @@ void add_named_effects(SuiteModel& model, const std::vector<std::string>& names,
     const std::size_t dot = name.find('.');
     if (dot == std::string::npos) continue;
     const std::string effect = name.substr(0, dot);
-    bool present = false;
-    for (const EffectSpec& e : model.effects) present = present || e.name == effect;
-    if (present) continue;
+    if (find_spec(model.effects, effect)) continue;
+    if (find_effect(effect)->grouped) {
+      throw EffectError("--params", name + ": add " + effect +
+                                        " with the parameter it varies to the model first, e.g. "
+                                        "- group_variation: {parameter: wheelbase_error.Eb, sd: 0}");
+    }
     EffectSpec spec{effect, {}};
     for (const EffectParameterInfo& p : find_effect(effect)->parameters) {
       const bool fitted = std::find(names.begin(), names.end(), effect + "." + p.name) != names.end();
@@ -293,9 +301,9 @@ FitResult fit_exact(const Suite& suite, SuiteModel model, const std::vector<Hand
 
 // ---- The fast path ----------------------------------------------------------------------------
 
-/// What a run contributes to the likelihood: its residual d = error - mean and covariance S,
-/// as one vector (d, S column by column).
-using RunVector = Eigen::Matrix<double, 12, 1>;
+/// What a run contributes to the likelihood: its residual d = error - mean, covariance S and
+/// group column u (group_variation; zero without), as one vector (d, S column by column, u).
+using RunVector = Eigen::Matrix<double, 15, 1>;
 
 /// Every run's residual and covariance as a quadratic in the offsets delta of the fitted values
 /// from the anchor's:
@@ -305,13 +313,12 @@ using RunVector = Eigen::Matrix<double, 12, 1>;
 /// to the differences' error.
 class Surrogate {
  public:
-  Surrogate(const Residuals& anchor, std::vector<double> values) : v0_(std::move(values)) {
+  Surrogate(const Residuals& anchor, std::vector<double> values)
+      : v0_(std::move(values)), buffer_(anchor) {  // the buffer keeps each run's group
     for (const auto& ex : anchor) {
       sizes_.push_back(ex.size());
       for (const RunResidual& r : ex) y0_.push_back(to_vector(r));
     }
-    buffer_.resize(sizes_.size());
-    for (std::size_t e = 0; e < sizes_.size(); ++e) buffer_[e].resize(sizes_[e]);
     const std::size_t n = v0_.size();
     slope_.assign(n, {});
     curvature_.assign(n, {});
@@ -373,6 +380,7 @@ class Surrogate {
         r.mean.setZero();
         const Matrix3 S = Eigen::Map<const Matrix3>(y.data() + 3);
         r.cov = 0.5 * (S + S.transpose());
+        r.group_column = y.tail<3>();
         ++i;
       }
     }
@@ -387,7 +395,8 @@ class Surrogate {
   static RunVector to_vector(const RunResidual& r) {
     RunVector y;
     y.head<3>() = r.error - r.mean;
-    y.tail<9>() = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(r.cov.data());
+    y.segment<9>(3) = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(r.cov.data());
+    y.tail<3>() = r.group_column;
     return y;
   }
   static std::vector<RunVector> flat(const Residuals& res) {
@@ -469,7 +478,11 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
   };
   auto exact = [&](const std::vector<double>& x) {
     apply(model, handles, x.data());
-    return -negative_sum(run_log_likelihoods(cache.at(model, counter), scatter));
+    try {
+      return -negative_sum(run_log_likelihoods(cache.at(model, counter), scatter));
+    } catch (const InputError&) {  // a custom expression not finite at a trial point: a wall
+      return -1e300;
+    }
   };
   double ll = exact(u);
   apply(model, handles, u.data());
@@ -515,12 +528,18 @@ std::string model_key(const SuiteModel& m) {
   put(m.measurement_noise.theta_rad);
   put(m.order);
   for (const EffectSpec& e : m.effects) {
-    const EffectInfo* info = find_effect(e.name);
+    const EffectInfo* info = info_of(e);
     bool inert = info && info->parameters.size() == e.values.size();
     for (std::size_t i = 0; inert && i < e.values.size(); ++i) inert = e.values[i] == info->parameters[i].neutral;
     if (inert) continue;
     key += e.name;
     key += '\0';
+    key += e.target;  // group_variation's varied parameter
+    key += '\0';
+    // A custom definition is immutable and shared by every copy of its spec: its address
+    // identifies it (two definitions of one name never meet in one model).
+    const auto definition = reinterpret_cast<std::uintptr_t>(e.custom.get());
+    key.append(reinterpret_cast<const char*>(&definition), sizeof definition);
     for (double v : e.values) put(v);
   }
   return key;
@@ -538,7 +557,7 @@ const std::vector<std::vector<RunResidual>>& ResidualCache::at(const SuiteModel&
   return by_model_.emplace(key, residuals(*suite_, model)).first->second;
 }
 
-std::string check_fit_parameter(const std::string& name) {
+std::string check_fit_parameter(const std::string& name, const EffectList& context) {
   if (find_robot_parameter(name)) return "";
   const std::size_t dot = name.find('.');
   if (dot == std::string::npos) {
@@ -546,7 +565,7 @@ std::string check_fit_parameter(const std::string& name) {
     for (const RobotParameter& p : robot_parameters()) names += (names.empty() ? "" : ", ") + p.name;
     return "unknown parameter '" + name + "' (use " + names + " or <effect>.<parameter>)";
   }
-  const EffectInfo* info = find_effect(name.substr(0, dot));
+  const EffectInfo* info = find_effect(name.substr(0, dot), context);
   if (!info) return "unknown effect in '" + name + "'";
   for (const EffectParameterInfo& p : info->parameters) {
     if (p.name == name.substr(dot + 1)) return "";
@@ -592,17 +611,6 @@ std::vector<const SuiteExperiment*> experiments_named(const Suite& suite, const 
     start = comma + 1;
   }
   return out;
-}
-
-/// Encoder travel of every run, as constant-curvature pieces (the samples of a path).
-std::vector<ArcSegment> encoder_pieces(const SuiteExperiment& ex, const SuiteRun& run) {
-  if (ex.logged) return run.pieces;
-  std::vector<ArcSegment> pieces;
-  for (const SampleRun& s : sample_schedule(ex.path)) {
-    const double n = static_cast<double>(s.count);
-    pieces.push_back({n * s.increment.left_m, n * s.increment.right_m});
-  }
-  return pieces;
 }
 
 struct SquareRuns {

@@ -75,9 +75,14 @@ Matrix3 arc_transition(double center_m, double angle_rad) {
   return phi;
 }
 
+Eigen::Vector2d wheel_variances(const ArcSegment& seg, const WheelNoise& k) {
+  return {k.k_left * k.k_left * std::abs(seg.left_m), k.k_right * k.k_right * std::abs(seg.right_m)};
+}
+
 Matrix2 wheel_noise_intensity(const ArcSegment& seg, double wheelbase_m, const WheelNoise& k) {
-  const double var_l = k.k_left * k.k_left * std::abs(seg.left_m);
-  const double var_r = k.k_right * k.k_right * std::abs(seg.right_m);
+  const Eigen::Vector2d var = wheel_variances(seg, k);
+  const double var_l = var.x();
+  const double var_r = var.y();
   Matrix2 n;
   n(0, 0) = (var_l + var_r) / (wheelbase_m * wheelbase_m);
   n(0, 1) = n(1, 0) = (var_r - var_l) / (2.0 * wheelbase_m);

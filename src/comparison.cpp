@@ -8,7 +8,6 @@
 #include <cmath>
 #include <limits>
 
-#include "odomcov/format.hpp"
 
 namespace odomcov {
 namespace {
@@ -18,9 +17,6 @@ constexpr int kDim = 3;
 constexpr std::int64_t kMinRunsForLrt = 10;
 /// chi^2_3 95% point (Abramowitz & Stegun 26.8): the NEES bound of "outside_95".
 constexpr double kChi2_3_95 = 7.814727903251178;
-
-const char* const kComponent[kDim] = {"x", "y", "theta"};
-const char* const kUnit[kDim] = {"m", "m", "rad"};
 
 double student_t_two_sided(double t, double dof) {
   if (!(dof > 0) || !std::isfinite(t)) return std::isfinite(t) ? 1.0 : 0.0;
@@ -34,8 +30,26 @@ double chi2_two_sided(double x, double dof) {
   return std::min(1.0, 2.0 * std::min(lower, 1.0 - lower));
 }
 
+/// The predicted mean and covariance of a run drawn from the experiment (a mixture over its
+/// runs), each run on its own (`own`: the between-group spread included).
+void predicted_block(const std::vector<RunResidual>& own, ExperimentComparison& c) {
+  const double n = static_cast<double>(own.size());
+  Matrix3 mean_cov = Matrix3::Zero();
+  MomentAccumulator means;
+  for (const RunResidual& r : own) {
+    mean_cov += r.cov / n;
+    means.add(r.mean);
+  }
+  c.predicted_mean = means.mean();
+  c.predicted_cov = mean_cov + means.scatter() / n;
+}
+
+/// `res` are the runs' predictions given the earlier runs of their groups
+/// (condition_on_groups), so whitening each run by its own covariance whitens the groups
+/// jointly; `own` are the runs' predictions on their own (marginal), for the predicted block.
 ExperimentComparison compare_experiment(const SuiteExperiment& ex,
-                                        const std::vector<RunResidual>& res, double alpha_test,
+                                        const std::vector<RunResidual>& res,
+                                        const std::vector<RunResidual>& own, double alpha_test,
                                         std::vector<Vector3>& whitened) {
   ExperimentComparison c;
   c.name = ex.name;
@@ -44,7 +58,6 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
   std::vector<Vector3> errors, raw;
   whitened.clear();
   Matrix3 mean_cov = Matrix3::Zero();
-  MomentAccumulator predicted_means;
   // A prediction that cannot whiten (singular or non-finite covariance, e.g. no wheel noise and
   // no measurement noise) leaves the experiment untestable, with no statistic computed from it.
   for (const RunResidual& r : res) {
@@ -72,12 +85,10 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
     c.outside_95 += (nees > kChi2_3_95 ? 1.0 : 0.0) / n;
     c.log_likelihood += gaussian_log_density(r.error, r.mean, r.cov);
     mean_cov += r.cov / n;
-    predicted_means.add(r.mean);
   }
   c.measured = moments(errors);
   c.errors = std::move(errors);
-  c.predicted_mean = predicted_means.mean();
-  c.predicted_cov = mean_cov + predicted_means.scatter() / n;
+  predicted_block(own, c);
 
   const SampleMoments z = moments(whitened);
   c.mean_test = c.n > kDim ? hotelling_test(z, Vector3::Zero())
@@ -114,59 +125,57 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
   return c;
 }
 
-std::vector<std::string> failure_words(const ExperimentComparison& c, double alpha_test) {
-  std::vector<std::string> words;
+/// Where one experiment fails, worst component first (the CLI words them: src/cli/failures.cpp).
+void add_failures(const ExperimentComparison& c, int index, double alpha_test,
+                  std::vector<Failure>& out) {
   if (c.mean_test.valid && c.mean_test.p_value < alpha_test) {
     int worst = 0;
     for (int k = 1; k < kDim; ++k) worst = c.mean_p(k) < c.mean_p(worst) ? k : worst;
     for (int k = 0; k < kDim; ++k) {
       if (k != worst && !(c.mean_p(k) < alpha_test)) continue;
-      words.push_back(c.name + ": " + kComponent[k] + " mean " + format_number(c.measured.mean(k), "%.4g") + " " +
-                      kUnit[k] + ", " + format_number(std::abs(c.mean_t(k)), "%.1f") +
-                      " standard errors from the predicted " + format_number(c.predicted_mean(k), "%.4g"));
+      out.push_back({Failure::Kind::mean, index, k, k});
     }
   }
-  if (c.cov_test.valid && c.cov_test.p_value < alpha_test) {
-    bool named = false;
-    for (int k = 0; k < kDim; ++k) {
-      if (!(c.variance_p(k) < alpha_test)) continue;
-      words.push_back(c.name + ": " + kComponent[k] + " variance " +
-                      format_number(c.variance_ratio(k), "%.2g") + "x predicted");
-      named = true;
-    }
-    if (!named) {
-      double worst = -1;
-      std::string text;
-      for (int a = 0; a < kDim; ++a) {
-        for (int b = a + 1; b < kDim; ++b) {
-          const double rm = c.measured.cov(a, b) / std::sqrt(c.measured.cov(a, a) * c.measured.cov(b, b));
-          const double rp = c.predicted_cov(a, b) /
-                            std::sqrt(c.predicted_cov(a, a) * c.predicted_cov(b, b));
-          if (std::abs(rm - rp) > worst) {
-            worst = std::abs(rm - rp);
-            text = c.name + ": " + kComponent[a] + "-" + kComponent[b] + " correlation " +
-                   format_number(rm, "%.2f") + " measured against " + format_number(rp, "%.2f") + " predicted";
-          }
-        }
-      }
-      if (c.cov_method == "nees") {
-        text = c.name + ": errors " + format_number(std::sqrt(c.nees_mean / kDim), "%.2g") +
-               "x the predicted spread (NEES " + format_number(c.nees_mean, "%.3g") +
-               " per run against 3)";
-      }
-      words.push_back(text);
+  if (!(c.cov_test.valid && c.cov_test.p_value < alpha_test)) return;
+  bool named = false;
+  for (int k = 0; k < kDim; ++k) {
+    if (!(c.variance_p(k) < alpha_test)) continue;
+    out.push_back({Failure::Kind::variance, index, k, k});
+    named = true;
+  }
+  if (named) return;
+  if (c.cov_method == "nees") {
+    out.push_back({Failure::Kind::spread, index, 0, 0});
+    return;
+  }
+  double worst = -1;
+  Failure f{Failure::Kind::correlation, index, 0, 1};
+  for (int a = 0; a < kDim; ++a) {
+    for (int b = a + 1; b < kDim; ++b) {
+      const double d = std::abs(c.measured_correlation(a, b) - c.predicted_correlation(a, b));
+      if (d > worst) worst = d, f.component = a, f.other = b;
     }
   }
-  return words;
+  out.push_back(f);
 }
 
 }  // namespace
+
+double ExperimentComparison::measured_correlation(int a, int b) const {
+  return measured.cov(a, b) / std::sqrt(measured.cov(a, a) * measured.cov(b, b));
+}
+
+double ExperimentComparison::predicted_correlation(int a, int b) const {
+  return predicted_cov(a, b) / std::sqrt(predicted_cov(a, a) * predicted_cov(b, b));
+}
 
 Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
   Comparison out;
   out.alpha = alpha;
   out.alpha_per_test = alpha / static_cast<double>(2 * suite.experiments.size() + 1);
-  const auto res = residuals(suite, model);
+  const auto grouped = residuals(suite, model);
+  const auto res = condition_on_groups(grouped);
+  const auto own = marginal(grouped);
   // Mardia's multivariate kurtosis [Mardia70] as a test of shape only: each experiment's
   // whitened residuals are standardised by that experiment's own mean and covariance (so scale
   // and mean misfits, which differ between experiments, do not read as tails), and the
@@ -174,13 +183,13 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
   // [Mardia74]: E b2 = p(p+2)(n-1)/(n+1),
   // Var b2 = 8p(p+2)(n-3)(n-p-1)(n-p+1)/((n+1)^2 (n+3)(n+5)), z = sum n(b2 - E)/sqrt(sum n^2 Var).
   bool tails_expected = false;
-  for (const EffectSpec& e : model.effects) tails_expected = tails_expected || find_effect(e.name)->heavy_tails;
+  for (const EffectSpec& e : model.effects) tails_expected = tails_expected || info_of(e)->heavy_tails;
   double excess = 0.0, variance = 0.0, weight = 0.0, b2_sum = 0.0;
   std::vector<double> kurtosis_ratio(suite.experiments.size(), 1.0);  // b2/E b2 per experiment
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     std::vector<Vector3> z;
     out.experiments.push_back(
-        compare_experiment(suite.experiments[e], res[e], out.alpha_per_test, z));
+        compare_experiment(suite.experiments[e], res[e], own[e], out.alpha_per_test, z));
     out.log_likelihood += out.experiments.back().log_likelihood;
     const double n = static_cast<double>(z.size());
     if (z.size() < static_cast<std::size_t>(kMinRunsForLrt)) continue;
@@ -243,18 +252,14 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
   Verdict overall;
   for (const ExperimentComparison* c : order) {
     overall.combine(c->verdict);
-    for (std::string& w : failure_words(*c, out.alpha_per_test)) out.failures.push_back(std::move(w));
+    add_failures(*c, static_cast<int>(c - out.experiments.data()), out.alpha_per_test, out.failures);
   }
   if (out.kurtosis.valid && out.kurtosis.p_value < out.alpha_per_test && !tails_expected) {
     overall.combine({Verdict::Kind::inconsistent, ""});
-    out.failures.push_back(std::string(out.kurtosis.statistic > 0 ? "tails heavier" : "tails lighter") +
-                           " than Gaussian: Mardia kurtosis " + format_number(out.mardia_b2, "%.1f") +
-                           " against " + format_number(out.mardia_expected, "%.1f") + ", p = " +
-                           format_number(out.kurtosis.p_value, "%.2g"));
+    out.failures.push_back({Failure::Kind::tails, -1, 0, 0});
   }
   out.verdict = overall;
   return out;
 }
-
 
 }  // namespace odomcov

@@ -89,6 +89,57 @@ PathSegment parse_segment(const Where& where, const YAML::Node& node) {
   return segment;
 }
 
+/// `- custom: {name, parameters: {p: start}, scale, scale_left, scale_right, wheelbase_factor}`.
+EffectSpec parse_custom(const Where& where, const YAML::Node& node) {
+  yaml::require_map(where, node, {"name", "parameters", "scale", "scale_left", "scale_right", "wheelbase_factor"});
+  CustomEffect def;
+  def.file = where.file;
+  def.line = yaml::line_of(node);
+  def.key = where.key;
+  def.name = yaml::to_string(where.child("name"), yaml::require(where, node, "name"));
+  if (const std::string e = check_custom_name(def.name); !e.empty()) yaml::fail(where.child("name"), node["name"], e);
+  if (find_effect(def.name)) yaml::fail(where.child("name"), node["name"], "name clash: " + quote(def.name) + " is a catalogue effect");
+  std::vector<double> start;
+  if (const YAML::Node params = node["parameters"]) {
+    const Where params_where = where.child("parameters");
+    if (!params.IsMap()) yaml::fail(params_where, params, "expected a map {name: starting value}");
+    for (const auto& entry : params) {
+      const std::string p = entry.first.Scalar();
+      if (const std::string e = check_custom_name(p); !e.empty()) yaml::fail(params_where.child(p), entry.first, e);
+      def.parameters.push_back(p);
+      start.push_back(yaml::to_number(params_where.child(p), entry.second));
+    }
+  }
+  bool any = false;
+  for (const auto& [k, e] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
+                             std::pair{"scale_right", &def.scale_right},
+                             std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+    const YAML::Node expr = node[k];
+    if (!expr) continue;
+    const Where expr_where = where.child(k);
+    *e = {yaml::to_string(expr_where, expr), where.file, yaml::line_of(expr), expr_where.key};
+    if (e->text.find_first_not_of(" \t") == std::string::npos) yaml::fail(expr_where, expr, "empty expression");
+    if (const std::string error = check_custom_expression(e->text, def.parameters); !error.empty()) {
+      yaml::fail(expr_where, expr, error);
+    }
+    any = true;
+  }
+  if (!any) yaml::fail(where, node, "give at least one of scale, scale_left, scale_right, wheelbase_factor");
+  return define_custom_effect(std::move(def), start);
+}
+
+/// A group_variation must vary a systematic parameter of another effect of its list: else bad
+/// input at its `parameter` line.
+void check_group_target_at(const Where& where, const YAML::Node& node, const EffectList& list) {
+  const std::string error = check_group_target(list);
+  if (error.empty()) return;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    if (list[i].name != kGroupVariation) continue;
+    yaml::fail(where.index(i).child(kGroupVariation).child("parameter"),
+               node[i].begin()->second["parameter"], error);
+  }
+}
+
 }  // namespace
 
 EffectList parse_effects(const YAML::Node& node, const std::string& file, const std::string& key) {
@@ -103,18 +154,28 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     }
     const std::string name = item.begin()->first.Scalar();
     const Where effect_where = item_where.child(name);
+    if (name == "custom") {
+      EffectSpec spec = parse_custom(effect_where, item.begin()->second);
+      if (find_spec(list, spec.name)) yaml::fail(effect_where.child("name"), item.begin()->second["name"], "name clash: effect " + quote(spec.name) + " listed twice");
+      list.push_back(std::move(spec));
+      continue;
+    }
     const EffectInfo* info = find_effect(name);
     if (!info) {
       std::string known;
       for (const EffectInfo& e : effect_catalogue()) known += (known.empty() ? "" : ", ") + e.name;
-      yaml::fail(effect_where, item.begin()->first, "unknown effect (known: " + known + ")");
+      yaml::fail(effect_where, item.begin()->first, "unknown effect (known: " + known + ", custom)");
     }
     const YAML::Node params = item.begin()->second;
     if (!params.IsMap()) yaml::fail(effect_where, params, "expected a map of parameters");
-    EffectSpec spec{name, {}};
+    EffectSpec spec{name, {}, {}};
+    if (info->grouped) {  // group_variation: {parameter: <effect>.<parameter>, sd: ...}
+      spec.target = yaml::to_string(effect_where.child("parameter"),
+                                    yaml::require(effect_where, params, "parameter"));
+    }
     for (const auto& entry : params) {
       const std::string p = entry.first.Scalar();
-      bool known = false;
+      bool known = info->grouped && p == "parameter";
       for (const EffectParameterInfo& info_p : info->parameters) known = known || info_p.name == p;
       if (!known) yaml::fail(effect_where.child(p), entry.first, "unknown parameter");
     }
@@ -130,12 +191,11 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
       }
       yaml::fail(effect_where, params, error);
     }
-    for (const EffectSpec& other : list) {
-      if (other.name == name) yaml::fail(effect_where, item, "effect listed twice");
-    }
+    if (find_spec(list, name)) yaml::fail(effect_where, item, "effect listed twice");
     list.push_back(std::move(spec));
   }
   if (list.size() > kMaxEffects) yaml::fail(where, node, "at most " + std::to_string(kMaxEffects) + " effects");
+  check_group_target_at(where, node, list);
   return list;
 }
 
@@ -279,6 +339,14 @@ Config parse_config_unguarded(const YAML::Node& root, const std::string& file) {
                           "simulation.runs", config.simulation.runs, sample_count(config.path));
   }
   return config;
+}
+
+EffectList load_effects(const std::string& file) {
+  return yaml::guarded(file, [&] {
+    const YAML::Node root = yaml::load_file(file);
+    if (!root.IsSequence()) yaml::fail({file, ""}, root, "expected a list of effects, e.g. - custom: {name: ..., ...}");
+    return parse_effects(root, file, "");
+  });
 }
 
 Config load_config(const std::string& file) { return parse_config(yaml::load_file(file), file); }

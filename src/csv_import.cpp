@@ -72,7 +72,9 @@ Vector3 in_start_frame(const Vector3& pose, const Vector3& start) {
   return {c * dx + s * dy, -s * dx + c * dy, pose.z() - start.z()};
 }
 
-std::string number(double v) { return format_number(v, "%.12g"); }
+/// Every number the importer writes, at full precision: Unix timestamps at 1 kHz need 13
+/// significant digits to stay distinct, and the written suite must always load back.
+std::string number(double v) { return format_number(v, "%.17g"); }
 
 ConvertedRun convert(const std::string& file, const CsvImportOptions& o) {
   const csv::Table table = csv::read(file, {"t", "left", "right", "x", "y", "theta"});

@@ -37,24 +37,18 @@ std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<Run
   return out;
 }
 
-/// Systematic candidates move the mean and are judged on the full likelihood; the others only
-/// add randomness and are judged on the scatter part, which a mean misfit cannot inflate.
-bool systematic(const std::string& effect) { return find_candidate(effect)->systematic; }
-
-/// The parameters a candidate fits (CandidateType::fitted, from the effect's own metadata).
-const std::vector<std::string>& fitted_names(const std::string& effect) {
-  return find_candidate(effect)->fitted;
-}
-
-/// The fitted parameters of a model's effects, split into systematic and random ones.
+/// The fitted parameters of a model's effects (catalogue or custom, from their EffectInfo),
+/// split into systematic ones (moving the mean, fitted on the full likelihood) and random ones
+/// (fitted on the scatter part, which a mean misfit cannot inflate).
 struct FittedNames {
   std::vector<std::string> systematic, random;
 };
 FittedNames split_fitted_names(const EffectList& effects) {
   FittedNames out;
   for (const EffectSpec& e : effects) {
-    for (const std::string& n : fitted_names(e.name)) {
-      (systematic(e.name) ? out.systematic : out.random).push_back(n);
+    const EffectInfo& info = *info_of(e);
+    for (const std::string& n : effect_candidate(info).fitted) {
+      (info.systematic ? out.systematic : out.random).push_back(n);
     }
   }
   return out;
@@ -79,34 +73,53 @@ SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* 
   return out;
 }
 
-/// True when every fitted parameter's "no effect" value is the edge of its range (a size that
-/// cannot be negative): the likelihood-ratio statistic is then a 50:50 mixture of chi^2_0 and
-/// chi^2_dof [Self87], so the p-value is half the chi^2 one.
-bool on_boundary(const std::string& effect) { return find_candidate(effect)->on_boundary; }
+/// The value of a fitted parameter in a model: a robot parameter ("k_left") or an effect's
+/// ("wheelbase_error.Eb"); NaN when the model lacks it.
+double fitted_value(SuiteModel& model, const std::string& name) {
+  const std::size_t dot = name.find('.');
+  if (dot == std::string::npos) {
+    for (const RobotParameter& p : robot_parameters()) {
+      if (p.name == name) return p.ref(model.robot);
+    }
+    return kNaN;
+  }
+  const EffectSpec* spec = find_spec(model.effects, name.substr(0, dot));
+  if (!spec) return kNaN;
+  const auto& ps = info_of(*spec)->parameters;
+  for (std::size_t i = 0; i < ps.size() && i < spec->values.size(); ++i) {
+    if (ps[i].name == name.substr(dot + 1)) return spec->values[i];
+  }
+  return kNaN;
+}
 
-/// The candidate's reported parameters, values and standard errors from its fit: a robot
-/// candidate's fitted parameters; an effect's every parameter (NaN standard error where not
-/// fitted), completed by the effect's own hook (EffectInfo::complete).
-void describe_fit(const Suite& suite, const FitResult& f, Eigen::Index offset, const Eigen::VectorXd& se,
-                  Candidate& c) {
-  const CandidateType& type = *find_candidate(c.effect);
-  if (type.robot) {
+/// True when a candidate is reported by its fitted names (a robot candidate, or a group
+/// candidate whose fit spans the varied effect and group_variation), not by its effect's spec.
+bool reported_by_names(const CandidateType& type) { return type.robot || type.effect != type.name; }
+
+/// The candidate's reported parameters, values and standard errors from its fit: a robot or
+/// group candidate's fitted parameters (named within the candidate's effect: "sd" beside
+/// "wheelbase_error.Eb"); an effect's every parameter (NaN standard error where not fitted),
+/// completed by the effect's own hook (EffectInfo::complete).
+void describe_fit(const Suite& suite, const CandidateType& type, Eigen::Index offset,
+                  const Eigen::VectorXd& se, Candidate& c) {
+  if (reported_by_names(type)) {
+    const std::string prefix = type.effect + ".";
     for (std::size_t i = 0; i < type.fitted.size(); ++i) {
-      const auto k = offset + static_cast<Eigen::Index>(i);
-      c.parameters.push_back(type.fitted[i]);
-      c.values.push_back(f.values(k));
-      c.stderrs.push_back(se(k));
+      const std::string& n = type.fitted[i];
+      const bool within = !type.effect.empty() && n.rfind(prefix, 0) == 0;
+      c.parameters.push_back(within ? n.substr(prefix.size()) : n);
+      c.values.push_back(fitted_value(c.model, n));
+      c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
     }
     return;
   }
-  EffectSpec* spec = nullptr;
-  for (EffectSpec& e : c.model.effects) spec = e.name == c.effect ? &e : spec;
-  const EffectInfo& info = *find_effect(c.effect);
+  EffectSpec* spec = find_spec(c.model.effects, type.effect);
+  const EffectInfo& info = *info_of(*spec);
   std::vector<double> stderrs(info.parameters.size(), kNaN);
   for (std::size_t p = 0; p < info.parameters.size(); ++p) {
     c.parameters.push_back(info.parameters[p].name);
     for (std::size_t i = 0; i < type.fitted.size(); ++i) {
-      if (type.fitted[i] == c.effect + "." + info.parameters[p].name) {
+      if (type.fitted[i] == type.effect + "." + info.parameters[p].name) {
         stderrs[p] = se(offset + static_cast<Eigen::Index>(i));
       }
     }
@@ -116,14 +129,108 @@ void describe_fit(const Suite& suite, const FitResult& f, Eigen::Index offset, c
   c.stderrs = stderrs;
 }
 
+/// True when a parameter's "no effect" value is the closed lower edge of its range.
+bool neutral_at_edge(const EffectParameterInfo& p) { return p.neutral == p.lower && !p.open_lower; }
+
+/// The group_variation candidate varying `target` ("wheelbase_error.Eb"): it fits the varied
+/// parameter too when its effect is not in the model yet (joining at its neutral value), and
+/// group_variation's sd from its typical size; it reads as group_variation's physics and
+/// signature. On the boundary when every fitted size is (sd, and the new parameter's).
+CandidateType group_candidate(const std::string& target, const EffectList& model) {
+  const EffectInfo& group = *find_effect(kGroupVariation);
+  const std::string effect = target.substr(0, target.find('.'));
+  CandidateType c;
+  c.name = std::string(kGroupVariation) + "(" + target + ")";
+  c.effect = kGroupVariation;
+  c.physics = group.physics + ", varying " + target;
+  c.signature = group.signature;
+  c.systematic = group.systematic;
+  c.heavy_tails = group.heavy_tails;
+  c.on_boundary = true;
+  if (!find_spec(model, effect)) {
+    const EffectInfo& varied = *find_effect(effect);
+    EffectSpec spec{effect, {}};
+    for (const EffectParameterInfo& p : varied.parameters) {
+      spec.values.push_back(p.neutral);
+      if (effect + "." + p.name == target) c.on_boundary = neutral_at_edge(p);
+    }
+    c.start.push_back(spec);
+    c.fitted.push_back(target);
+  }
+  c.start.push_back({kGroupVariation, {group.parameters[0].typical}, target});
+  c.fitted.push_back(std::string(kGroupVariation) + "." + group.parameters[0].name);
+  c.on_boundary = c.on_boundary && neutral_at_edge(group.parameters[0]);
+  return c;
+}
+
+/// The group_variation candidates: one per systematic parameter of the model's effects, and one
+/// per catalogue parameter that varies between groups (EffectParameterInfo) when the model
+/// lacks it. Only for suites that give groups, and when the model has no group_variation yet.
+std::vector<CandidateType> group_candidates(const Suite& suite, const EffectList& model) {
+  bool grouped = false;
+  for (const SuiteExperiment& ex : suite.experiments) grouped = grouped || !ex.group.empty();
+  if (!grouped || find_spec(model, kGroupVariation)) return {};
+  std::vector<std::string> targets;
+  for (const EffectSpec& e : model) {
+    const EffectInfo* info = info_of(e);
+    if (!info->systematic || info->grouped) continue;
+    for (const EffectParameterInfo& p : info->parameters) targets.push_back(e.name + "." + p.name);
+  }
+  for (const EffectInfo& info : effect_catalogue()) {
+    for (const EffectParameterInfo& p : info.parameters) {
+      const std::string t = info.name + "." + p.name;
+      const bool listed = std::find(targets.begin(), targets.end(), t) != targets.end();
+      if (p.varies_between_groups && !listed) targets.push_back(t);
+    }
+  }
+  std::vector<CandidateType> out;
+  for (const std::string& t : targets) out.push_back(group_candidate(t, model));
+  return out;
+}
+
+/// The round's candidates: the catalogue's effects not in the model (grouped ones only as group
+/// candidates), the group candidates, the robot candidates; only those `only` names (by their
+/// name or their effect's) when given; then the user's own candidates, each from its given
+/// values (a given catalogue candidate starts there too).
+std::vector<CandidateType> round_candidates(const Suite& suite, const EffectList& model,
+                                            const std::vector<std::string>& only,
+                                            const EffectList& given) {
+  std::vector<CandidateType> types;
+  for (const CandidateType& t : candidate_types()) {
+    if (!t.robot && !find_spec(model, t.name) && !find_effect(t.name)->grouped) types.push_back(t);
+  }
+  for (CandidateType& t : group_candidates(suite, model)) types.push_back(std::move(t));
+  for (const CandidateType& t : candidate_types()) {
+    if (t.robot) types.push_back(t);
+  }
+  if (!only.empty()) {
+    std::vector<CandidateType> kept;
+    for (CandidateType& t : types) {
+      const bool named = std::find(only.begin(), only.end(), t.name) != only.end() ||
+                         std::find(only.begin(), only.end(), t.effect) != only.end();
+      if (named) kept.push_back(std::move(t));
+    }
+    types = std::move(kept);
+  }
+  for (const EffectSpec& c : given) {
+    if (c.values.empty() || find_spec(model, c.name)) continue;  // nothing to fit / in the model
+    auto listed = std::find_if(types.begin(), types.end(),
+                               [&](const CandidateType& t) { return t.name == c.name; });
+    if (listed == types.end()) listed = types.insert(types.end(), effect_candidate(*info_of(c)));
+    listed->start = {c};
+  }
+  return types;
+}
+
 /// The signature rule for the pairs a Gaussian likelihood cannot separate
 /// (EffectInfo::confused_with): when both are significant, the one the tails speak against
 /// moves to just below the other (the rest of the order stands).
-void apply_tail_rule(std::vector<Candidate>& candidates, bool heavy_tails) {
+void apply_tail_rule(std::vector<Candidate>& candidates, const std::vector<CandidateType>& types,
+                     bool heavy_tails) {
   auto at = [&](const std::string& n) {
     return std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) { return c.effect == n; });
   };
-  for (const CandidateType& type : candidate_types()) {
+  for (const CandidateType& type : types) {
     if (type.confused_with.empty()) continue;
     auto self = at(type.name), other = at(type.confused_with);
     if (self == candidates.end() || other == candidates.end() || !self->significant || !other->significant) continue;
@@ -140,7 +247,8 @@ void apply_tail_rule(std::vector<Candidate>& candidates, bool heavy_tails) {
 }  // namespace
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
-                   const std::vector<std::string>& only, DiagnoseProgress* progress, FitPath path) {
+                   const std::vector<std::string>& only, DiagnoseProgress* progress,
+                   const EffectList& candidates, FitPath path) {
   // Every exact propagation of the round, kept: the fast path's anchors and difference points
   // around the base model are shared by all candidates.
   ResidualCache cache(suite);
@@ -162,33 +270,26 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   const double base_scatter = scatter_log_likelihood(base_residuals);
   const std::vector<double> base_by_experiment = experiment_log_likelihoods(base_residuals);
 
-  std::vector<std::string> names;
-  for (const CandidateType& type : candidate_types()) {
-    bool in_model = false;
-    for (const EffectSpec& e : model.effects) in_model = in_model || e.name == type.name;
-    if (!in_model) names.push_back(type.name);
-  }
-  if (!only.empty()) {
-    std::vector<std::string> kept;
-    for (const std::string& n : names) {
-      if (std::find(only.begin(), only.end(), n) != only.end()) kept.push_back(n);
-    }
-    names = kept;
-  }
+  const std::vector<CandidateType> types = round_candidates(suite, model.effects, only, candidates);
 
   // The fits: the base refit, one per candidate and the winner's refit.
-  if (progress) progress->fits_total = static_cast<std::int64_t>(names.size()) + 2;
+  if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
   const double log_runs = std::log(static_cast<double>(d.runs));
-  for (const std::string& name : names) {
+  for (const CandidateType& type : types) {
     Candidate c;
-    c.effect = name;
-    c.systematic = systematic(name);
+    c.effect = type.name;
+    c.physics = type.physics;
+    c.signature = type.signature;
+    c.robot = type.robot;
+    c.systematic = type.systematic;
     std::vector<std::string> fitted = c.systematic ? nuisance.systematic : nuisance.random;
-    const std::vector<std::string> own = fitted_names(name);
+    const std::vector<std::string>& own = type.fitted;
     fitted.insert(fitted.end(), own.begin(), own.end());
     const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
+    SuiteModel start = base;
+    start.effects.insert(start.effects.end(), type.start.begin(), type.start.end());
     const FitResult f =
-        fit(suite, base, fitted, kind, progress ? &progress->evaluations : nullptr, path, &cache);
+        fit(suite, start, fitted, kind, progress ? &progress->evaluations : nullptr, path, &cache);
     // With heavy tails the observed information understates the uncertainty: sandwich SEs.
     const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
     c.model = f.model;
@@ -205,8 +306,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       lr /= before.mardia_b2 / before.mardia_expected;
     }
     lr = std::max(0.0, lr);
-    c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
-    describe_fit(suite, f, static_cast<Eigen::Index>(fitted.size() - own.size()), se, c);
+    c.p_value = lr == 0.0 ? 1.0 : (type.on_boundary ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
+    describe_fit(suite, type, static_cast<Eigen::Index>(fitted.size() - own.size()), se, c);
     const auto& candidate_residuals = cache.at(c.model);
     c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - base_full;
     const std::vector<double> by_experiment = experiment_log_likelihoods(candidate_residuals);
@@ -228,7 +329,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   std::stable_sort(d.candidates.begin(), d.candidates.end(), [&](const Candidate& a, const Candidate& b) {
     return a.significant != b.significant ? a.significant : a.delta_bic < b.delta_bic;
   });
-  apply_tail_rule(d.candidates, d.heavy_tails);
+  apply_tail_rule(d.candidates, types, d.heavy_tails);
   if (!d.candidates.empty() && d.candidates.front().significant) {
     d.best = 0;
     // The model to adopt: everything refitted by its part of the likelihood, now that the new
@@ -236,19 +337,20 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     Candidate& best = d.candidates.front();
     // (When every effect is of the candidate's kind and nothing was completed after its fit,
     // the candidate's own fit was already that refit: all of them jointly on its likelihood.)
-    bool other_kind = find_candidate(best.effect)->complete != nullptr;
-    for (const EffectSpec& e : best.model.effects) other_kind = other_kind || systematic(e.name) != best.systematic;
+    const CandidateType& type = *std::find_if(
+        types.begin(), types.end(), [&](const CandidateType& t) { return t.name == best.effect; });
+    bool other_kind = type.complete != nullptr;
+    for (const EffectSpec& e : best.model.effects) {
+      other_kind = other_kind || info_of(e)->systematic != best.systematic;
+    }
     if (other_kind) best.model = refit(suite, best.model, progress, path, cache);
-    if (find_candidate(best.effect)->robot) {
-      for (std::size_t i = 0; i < best.parameters.size(); ++i) {
-        for (const RobotParameter& p : robot_parameters()) {
-          if (p.name == best.parameters[i]) best.values[i] = p.ref(best.model.robot);
-        }
+    if (reported_by_names(type)) {
+      for (std::size_t i = 0; i < type.fitted.size(); ++i) {
+        best.values[i] = fitted_value(best.model, type.fitted[i]);
       }
     } else {
-      for (const EffectSpec& e : best.model.effects) {
-        if (e.name == best.effect) best.values = e.values;  // completed ones stay, fitted ones refitted
-      }
+      // completed ones stay, fitted ones refitted
+      best.values = find_spec(best.model.effects, type.effect)->values;
     }
   }
   if (progress) progress->fits_done = progress->fits_total.load();
@@ -263,9 +365,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
 }
 
 std::string explain(const Candidate& c) {
-  const CandidateType& type = *find_candidate(c.effect);
-  std::string text = type.physics + ": ";
-  const std::string& signature = type.signature;
+  std::string text = c.physics + ": ";
+  const std::string& signature = c.signature;
   for (std::size_t i = 0; i < c.parameters.size(); ++i) {
     text += (i ? ", " : "") + c.parameters[i] + " = " + format_number(c.values[i], "%.6g");
     if (std::isfinite(c.stderrs[i])) text += " +/- " + format_number(c.stderrs[i], "%.1g");
@@ -314,7 +415,7 @@ std::string verdict_text(const Diagnosis& d) {
 }
 
 std::string candidate_yaml(const Candidate& c, const SuiteModel& model) {
-  if (find_candidate(c.effect)->robot) {
+  if (c.robot) {
     Robot robot = model.robot;
     for (std::size_t i = 0; i < c.parameters.size(); ++i) {
       for (const RobotParameter& p : robot_parameters()) {
@@ -323,10 +424,14 @@ std::string candidate_yaml(const Candidate& c, const SuiteModel& model) {
     }
     return robot_yaml(robot);
   }
+  // The effects the candidate adds, in its model's order: a group candidate's varied effect
+  // (when new) before group_variation, so the lines pasted under model.effects never repeat an
+  // effect the suite has.
+  std::string text;
   for (const EffectSpec& e : c.model.effects) {
-    if (e.name == c.effect) return effect_yaml(e);
+    if (!find_spec(model.effects, e.name)) text += (text.empty() ? "" : "\n") + effect_yaml(e);
   }
-  return "";
+  return text;
 }
 
 }  // namespace odomcov

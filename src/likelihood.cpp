@@ -5,6 +5,7 @@
 #include <Eigen/Cholesky>
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include "odomcov/propagation.hpp"
 #include "odomcov/second_order.hpp"
@@ -15,18 +16,41 @@ namespace {
 
 constexpr int kDim = 3;
 
+/// group_variation's column for one run: sd times the central difference of the systematic
+/// mean (exact for the perturbed path at any order) in the varied parameter. The step is 1e-6
+/// of the parameter's size (at least 1e-6): truncation O(h^2) and rounding O(eps/h) both stay
+/// near 1e-10 of the column.
+Vector3 group_column(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
+                     const Robot& robot, const EffectList& effects, const GroupTarget& target) {
+  if (!target.present || target.sd == 0.0) return Vector3::Zero();
+  const double value = effects[target.effect].values[target.parameter];
+  const double h = 1e-6 * std::max(1.0, std::abs(value));
+  EffectList shifted = effects;
+  shifted[target.effect].values[target.parameter] = value + h;
+  const Vector3 up = predict(pieces, durations, robot, shifted).mean;
+  shifted[target.effect].values[target.parameter] = value - h;
+  const Vector3 down = predict(pieces, durations, robot, shifted).mean;
+  return target.sd * (up - down) / (2.0 * h);
+}
+
 }  // namespace
 
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model) {
   const double B = model.robot.wheelbase_m;
   const Matrix3 meas = model.measurement_noise.covariance();
+  const GroupTarget target = group_target(model.effects);
+  std::map<std::string, int> groups;
   std::vector<std::vector<RunResidual>> out(suite.experiments.size());
   // Every unit of work: a planned-path experiment (one prediction serves all its runs) or one
   // logged run. They run in parallel over the whole suite (most logged experiments are single
   // runs, so a loop per experiment would leave cores idle).
+  // Group indices are assigned serially first (in experiment order), so they do not depend on
+  // the thread schedule.
   std::vector<std::pair<std::size_t, std::size_t>> work;
+  std::vector<int> group_of(suite.experiments.size());
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     const SuiteExperiment& ex = suite.experiments[e];
+    group_of[e] = groups.emplace(group_key(ex), static_cast<int>(groups.size())).first->second;
     out[e].resize(ex.runs.size());
     if (!ex.logged) {
       work.emplace_back(e, 0);
@@ -37,33 +61,80 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
   tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
     const auto [e, r] = work[w];
     const SuiteExperiment& ex = suite.experiments[e];
+    const int group = group_of[e];
     if (ex.logged) {
-      const Prediction p = predict_with_order(ex.runs[r].pieces, ex.runs[r].durations_s,
-                                              model.robot, model.effects, model.order);
-      out[e][r] = {pose_error(ex.runs[r].measured, p.odometry_end_pose), p.mean + p.noise_mean,
-                   p.cov + meas};
+      const SuiteRun& run = ex.runs[r];
+      const Prediction p =
+          predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
+      out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean,
+                   p.cov + meas,
+                   group_column(run.pieces, run.durations_s, model.robot, model.effects, target),
+                   group};
       return;
     }
     std::vector<double> durations;
     const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
     const Prediction p = predict_with_order(pieces, durations, model.robot, model.effects, model.order);
+    const Vector3 column = group_column(pieces, durations, model.robot, model.effects, target);
     const Vector3 odometry = sampled_end_pose(ex.path, B);
     for (std::size_t i = 0; i < ex.runs.size(); ++i) {
-      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean, p.cov + meas};
+      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean, p.cov + meas,
+                   column, group};
     }
   }, tbb::simple_partitioner());
+  return out;
+}
+
+std::vector<std::vector<RunResidual>> condition_on_groups(
+    const std::vector<std::vector<RunResidual>>& res) {
+  struct Posterior {
+    double m = 0.0, v = 1.0;  // of the group's standard-normal constant
+  };
+  std::map<int, Posterior> posteriors;
+  std::vector<std::vector<RunResidual>> out = res;
+  for (auto& ex : out) {
+    for (RunResidual& r : ex) {
+      if (r.group_column.isZero(0.0)) continue;
+      const Vector3 u = r.group_column;
+      Posterior& g = posteriors[r.group];
+      const Eigen::LLT<Matrix3> llt(r.cov);
+      const bool whitens = llt.info() == Eigen::Success && r.cov.allFinite() && u.allFinite();
+      r.mean += u * g.m;
+      const Vector3 residual = r.error - r.mean;
+      r.cov += g.v * u * u.transpose();
+      r.group_column.setZero();
+      if (!whitens || !residual.allFinite()) continue;  // compare calls such a run untestable
+      const Vector3 a = llt.matrixL().solve(u), b = llt.matrixL().solve(residual);
+      const double gain = g.v / (1.0 + g.v * a.squaredNorm());
+      g.m += gain * a.dot(b);
+      g.v = gain;
+    }
+  }
+  return out;
+}
+
+std::vector<std::vector<RunResidual>> marginal(const std::vector<std::vector<RunResidual>>& res) {
+  std::vector<std::vector<RunResidual>> out = res;
+  for (auto& ex : out) {
+    for (RunResidual& r : ex) {
+      r.cov += r.group_column * r.group_column.transpose();
+      r.group_column.setZero();
+    }
+  }
   return out;
 }
 
 std::vector<double> run_log_likelihoods(const std::vector<std::vector<RunResidual>>& res,
                                         bool scatter) {
   std::vector<double> out;
+  if (!scatter) {
+    for (const auto& ex : condition_on_groups(res)) {
+      for (const RunResidual& r : ex) out.push_back(gaussian_log_density(r.error, r.mean, r.cov));
+    }
+    return out;
+  }
   for (const auto& ex : res) {
     const double n = static_cast<double>(ex.size());
-    if (!scatter) {
-      for (const RunResidual& r : ex) out.push_back(gaussian_log_density(r.error, r.mean, r.cov));
-      continue;
-    }
     Vector3 mean = Vector3::Zero();
     for (const RunResidual& r : ex) mean += (r.error - r.mean) / n;
     for (const RunResidual& r : ex) {

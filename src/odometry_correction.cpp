@@ -29,15 +29,7 @@ std::optional<OdometryCorrection> odometry_correction(const Suite& suite, const 
     k.kind = kind;
     Eigen::Vector2d cg_before = Eigen::Vector2d::Zero(), cg_after = Eigen::Vector2d::Zero();
     for (const SuiteRun& run : ex.runs) {
-      // The encoder travel, piece by piece (a planned path's samples of one increment lie on one arc).
-      std::vector<ArcSegment> pieces = run.pieces;
-      if (!ex.logged) {
-        pieces.clear();
-        for (const SampleRun& s : sample_schedule(ex.path)) {
-          const double n = static_cast<double>(s.count);
-          pieces.push_back({n * s.increment.left_m, n * s.increment.right_m});
-        }
-      }
+      const std::vector<ArcSegment> pieces = encoder_pieces(ex, run);
       Vector3 nominal = Vector3::Zero(), corrected = Vector3::Zero();
       for (const ArcSegment& p : pieces) {
         nominal = drive(nominal, p, B);

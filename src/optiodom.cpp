@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -20,6 +21,8 @@ namespace fs = std::filesystem;
 
 /// A run whose total encoder heading change is below this is a straight run.
 constexpr double kStraightBelowRad = 0.5;
+/// Sessions started before this hour belong to the previous evening's recording session.
+constexpr int kSessionDayStartsHour = 6;
 
 struct Metadata {
   std::string file;
@@ -59,6 +62,25 @@ Metadata read_metadata(const fs::path& dir) {
   return m;
 }
 
+/// The recording session of a session directory named DDMMYYYYhhmm (its start time): the
+/// evening it belongs to, as YYYY-MM-DD, a session started before 06:00 belonging to the
+/// evening before (the December and January recordings run past midnight). Any other name is
+/// its own session.
+std::string recording_session(const std::string& name) {
+  if (name.size() != 12 || name.find_first_not_of("0123456789") != std::string::npos) return name;
+  std::tm tm{};
+  tm.tm_mday = std::stoi(name.substr(0, 2));
+  tm.tm_mon = std::stoi(name.substr(2, 2)) - 1;
+  tm.tm_year = std::stoi(name.substr(4, 4)) - 1900;
+  tm.tm_hour = 12;  // noon: no daylight-saving edge moves the date
+  if (std::stoi(name.substr(8, 2)) < kSessionDayStartsHour) tm.tm_mday -= 1;
+  tm.tm_isdst = -1;
+  std::mktime(&tm);  // normalises the day before the 1st
+  char text[16];
+  std::strftime(text, sizeof text, "%Y-%m-%d", &tm);
+  return text;
+}
+
 }  // namespace
 
 std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
@@ -96,6 +118,7 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
 
   std::vector<ImportedFile> files;
   std::map<std::string, std::vector<std::string>> experiments;  // name -> log paths
+  std::map<std::string, std::string> groups;                     // name -> recording session
   std::map<std::string, ImportSummary> sums;
   for (const std::string& s : options.sessions) {
     const fs::path dir = fs::path(s).lexically_normal();
@@ -146,6 +169,7 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
       const std::string rel = type + "/" + session + "/" + stem.substr(session.size() + 1) + ".csv";
       files.push_back({rel, log});
       experiments[experiment].push_back(rel);
+      groups[experiment] = recording_session(session);
       ImportSummary& sum = sums[experiment];
       sum.experiment = experiment;
       sum.runs += 1;
@@ -161,7 +185,9 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
   doc.name = options.name;
   doc.robot = Robot{wheelbase, {options.k, options.k}};
   doc.measurement_noise = options.measurement_noise;
-  for (const auto& [name, logs] : experiments) doc.experiments.push_back({name, "", "", logs});
+  for (const auto& [name, logs] : experiments) {
+    doc.experiments.push_back({name, "", "", logs, groups[name]});
+  }
   const std::string yaml = suite_yaml(doc);
   files.push_back({"suite.yaml", yaml});
   if (summary) {

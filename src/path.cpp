@@ -96,6 +96,15 @@ std::int64_t sample_count(const Path& path) {
   return to_count(std::ceil(path.duration_s() * path.sample_rate_hz - kSampleTolerance));
 }
 
+std::vector<ArcSegment> sample_arcs(const Path& path) {
+  std::vector<ArcSegment> arcs;
+  for (const SampleRun& s : sample_schedule(path)) {
+    const double n = static_cast<double>(s.count);
+    arcs.push_back({n * s.increment.left_m, n * s.increment.right_m});
+  }
+  return arcs;
+}
+
 std::vector<SampleRun> sample_schedule(const Path& path) {
   std::vector<SampleRun> runs;
   const double f = path.sample_rate_hz;

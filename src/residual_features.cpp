@@ -176,11 +176,9 @@ constexpr double kSensitivityStep = 1e-4;
 /// The model with one factor effect moved by kSensitivityStep (added at 1 + step if absent).
 SuiteModel nudged(const SuiteModel& model, const std::string& effect) {
   SuiteModel m = model;
-  for (EffectSpec& e : m.effects) {
-    if (e.name == effect) {
-      e.values[0] += kSensitivityStep;
-      return m;
-    }
+  if (EffectSpec* e = find_spec(m.effects, effect)) {
+    e->values[0] += kSensitivityStep;
+    return m;
   }
   m.effects.push_back({effect, {1.0 + kSensitivityStep}});
   return m;
@@ -202,7 +200,7 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
   return acc.result();
 }
 
-std::string experiment_group(const SuiteExperiment& ex) { return ex.name; }
+std::string experiment_group(const SuiteExperiment& ex) { return group_key(ex); }
 
 const std::vector<std::string>& residual_feature_names() {
   static const std::vector<std::string> names = {"distance",         "angle_turned", "turn_direction",

@@ -60,8 +60,12 @@
 // where it is smooth. Cost: (QK)^2/2 + K Q^2 pair evaluations.
 #include "odomcov/second_order.hpp"
 
+#include "odomcov/limits.hpp"
+
 #include <algorithm>
 #include <cmath>
+#include <string>
+#include <stdexcept>
 #include <complex>
 
 #include "effects/effect.hpp"
@@ -119,15 +123,15 @@ void make_node(const Model& model, std::size_t k, double u, double weight, doubl
                Node& node) {
   const Piece& p = model.pieces[k];
   const int m = model.m;
-  const double* g0 = &model.g_start[k * static_cast<std::size_t>(m)];
-  const double* gt = &model.g_theta[k * static_cast<std::size_t>(m)];
+  const double* g0 = model.g_start.data() + k * static_cast<std::size_t>(m);
+  const double* gt = model.g_theta.data() + k * static_cast<std::size_t>(m);
   for (int i = 0; i < m; ++i) g_buffer[i] = g0[i] + gt[i] * u;
   node.A = std::polar(1.0, p.heading0 + p.a * u);
   node.d = p.d;
   node.W = p.w0 + p.i_tt * u;
   node.V = node.W + dot(g_buffer, g_buffer, m);
   node.i_td = p.i_td;
-  node.gd = &model.g_d[k * static_cast<std::size_t>(m)];
+  node.gd = model.g_d.data() + k * static_cast<std::size_t>(m);
   node.g = g_buffer;
   node.g_gd = dot(g_buffer, node.gd, m);
   node.m = 0.5 * p.i_td + node.g_gd;
@@ -209,6 +213,7 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
                                const std::vector<double>& durations_s, double wheelbase_m,
                                std::vector<double>& refined_durations_s) {
   // Durations (when given) follow the pieces: summed where pieces merge, split where they are cut.
+  // Pieces merge only at equal durations too, so a piece keeps its speed (a custom effect's v).
   const bool timed = !durations_s.empty();
   std::vector<ArcSegment> merged;
   std::vector<double> merged_durations;
@@ -216,7 +221,7 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
   for (std::size_t i = 0; i < pieces.size();) {
     std::size_t j = i + 1;
     while (j < pieces.size() && pieces[j].left_m == pieces[i].left_m &&
-           pieces[j].right_m == pieces[i].right_m) {
+           pieces[j].right_m == pieces[i].right_m && (!timed || durations_s[j] == durations_s[i])) {
       ++j;
     }
     const double count = static_cast<double>(j - i);
@@ -247,12 +252,21 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
 
 }  // namespace
 
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
+  std::vector<double> unused;
+  return refine(pieces, {}, wheelbase_m, unused).size();
+}
+
 Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
                                 const std::vector<double>& durations_s, const Robot& robot,
                                 const EffectList& effects) {
   const double B = robot.wheelbase_m;
   std::vector<double> refined_durations;
   const std::vector<ArcSegment> refined = refine(encoder_pieces, durations_s, B, refined_durations);
+  if (refined.size() > kMaxSecondOrderPieces) {
+    throw std::length_error("predict_second_order: " + std::to_string(refined.size()) +
+                            " quadrature pieces, above kMaxSecondOrderPieces (limits.hpp)");
+  }
   const effects::ResolvedPath resolved = effects::resolve(refined, refined_durations, robot, effects);
   const std::size_t K = resolved.pieces.size();
   Model model;
@@ -291,7 +305,9 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
     odometry = drive(odometry, r.encoder, B);
   }
   model.w_end = w;
-  const double* g_end = &model.g_start[K * mm];
+  // data() + offset, not &v[i]: with no run constants (m = 0) the vectors are empty and v[0]
+  // would bind a reference to null (UBSan, found by the fuzz targets).
+  const double* g_end = model.g_start.data() + K * mm;
   const double v_end = w + dot(g_end, g_end, m);
 
   // Regular nodes: Q per piece.
@@ -302,7 +318,7 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
   for (std::size_t k = 0; k < K; ++k) {
     for (int q = 0; q < kQ; ++q) {
       const std::size_t n = k * kQ + static_cast<std::size_t>(q);
-      make_node(model, k, gl[q].first, gl[q].second, &g_nodes[n * mm], nodes[n]);
+      make_node(model, k, gl[q].first, gl[q].second, g_nodes.data() + n * mm, nodes[n]);
       const Node& x = nodes[n];
       // (2)
       noise_mean += x.weight * x.A *
@@ -365,25 +381,39 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
 }
 
 std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
+  return coarsen_pieces(pieces, wheelbase_m, {}, nullptr);
+}
+
+std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m,
+                                       const std::vector<double>& durations_s,
+                                       std::vector<double>* coarse_durations_s) {
+  const bool timed = !durations_s.empty() && coarse_durations_s;
+  if (coarse_durations_s) coarse_durations_s->clear();
   std::vector<ArcSegment> out;
+  double span = 0.0;
   auto same_sense = [](double x, double y) { return x == 0.0 || y == 0.0 || (x > 0) == (y > 0); };
   ArcSegment current;
   bool open = false;
-  for (const ArcSegment& p : pieces) {
+  for (std::size_t i = 0; i < pieces.size(); ++i) {
+    const ArcSegment& p = pieces[i];
     if (open) {
       const ArcSegment merged{current.left_m + p.left_m, current.right_m + p.right_m};
       if (same_sense(current.left_m, p.left_m) && same_sense(current.right_m, p.right_m) &&
           std::abs(merged.heading_change_rad(wheelbase_m)) <= kPieceMaxAngle &&
           std::abs(merged.center_m()) <= kPieceMaxTravel) {
         current = merged;
+        if (timed) span += durations_s[i];
         continue;
       }
       out.push_back(current);
+      if (timed) coarse_durations_s->push_back(span);
     }
     current = p;
+    if (timed) span = durations_s[i];
     open = true;
   }
   if (open) out.push_back(current);
+  if (open && timed) coarse_durations_s->push_back(span);
   return out;
 }
 
@@ -396,13 +426,16 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
                               const EffectList& effects, int order) {
   if (order == 1) return predict(pieces, durations_s, robot, effects);
-  const std::vector<ArcSegment> coarse = coarsen_pieces(pieces, robot.wheelbase_m);
+  std::vector<double> coarse_durations;
+  const std::vector<ArcSegment> coarse =
+      coarsen_pieces(pieces, robot.wheelbase_m, durations_s, &coarse_durations);
   if (coarse.size() == pieces.size()) return predict_second_order(pieces, durations_s, robot, effects);
   // Fine pieces (a logged run): the first order on them, with every piece's duration, and only
-  // the order-2 correction (second minus first order, both untimed) on the coarsened pieces.
+  // the order-2 correction (second minus first order) on the coarsened pieces, timed when the
+  // pieces are (an effect may depend on the speed).
   Prediction out = predict(pieces, durations_s, robot, effects);
-  const Prediction coarse2 = predict_second_order(coarse, robot, effects);
-  const Prediction coarse1 = predict(coarse, robot, effects);
+  const Prediction coarse2 = predict_second_order(coarse, coarse_durations, robot, effects);
+  const Prediction coarse1 = predict(coarse, coarse_durations, robot, effects);
   out.noise_mean += coarse2.mean + coarse2.noise_mean - coarse1.mean - coarse1.noise_mean;
   out.cov += coarse2.cov - coarse1.cov;
   return out;

@@ -212,8 +212,9 @@ struct Simulator::Impl {
     leg.half_rad = 0.5 * leg.travel.heading_change_rad(leg.wheelbase_true);
     leg.cos_half = std::cos(leg.half_rad);
     leg.sin_half = std::sin(leg.half_rad);
-    leg.sigma_left = robot.noise.k_left * std::sqrt(std::abs(increment.left_m));
-    leg.sigma_right = robot.noise.k_right * std::sqrt(std::abs(increment.right_m));
+    const Eigen::Vector2d variance = wheel_variances(increment, robot.noise);
+    leg.sigma_left = std::sqrt(variance.x());
+    leg.sigma_right = std::sqrt(variance.y());
     leg.inv_two_b = 1.0 / (2.0 * leg.wheelbase_true);
     leg.series_sinc = std::abs(leg.half_rad) <= kSincSeriesMax;
     return leg;

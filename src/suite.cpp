@@ -12,11 +12,19 @@ Matrix3 MeasurementNoise::covariance() const {
   return Vector3(xy_m * xy_m, xy_m * xy_m, theta_rad * theta_rad).asDiagonal();
 }
 
+std::string group_key(const SuiteExperiment& ex) {
+  return ex.group.empty() ? "experiment:" + ex.name : "group:" + ex.group;
+}
+
 Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m) {
   if (!ex.logged) return sampled_end_pose(ex.path, wheelbase_m);
   Vector3 pose = Vector3::Zero();
   for (const ArcSegment& piece : run.pieces) pose = drive(pose, piece, wheelbase_m);
   return pose;
+}
+
+std::vector<ArcSegment> encoder_pieces(const SuiteExperiment& ex, const SuiteRun& run) {
+  return ex.logged ? run.pieces : sample_arcs(ex.path);
 }
 
 Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m) {
@@ -25,11 +33,7 @@ Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelba
 
 Vector3 sampled_end_pose(const Path& path, double wheelbase_m) {
   Vector3 pose = Vector3::Zero();
-  for (const SampleRun& run : sample_schedule(path)) {
-    const double n = static_cast<double>(run.count);
-    // `count` samples of one increment lie on one arc: drive it in one step.
-    pose = drive(pose, {n * run.increment.left_m, n * run.increment.right_m}, wheelbase_m);
-  }
+  for (const ArcSegment& arc : sample_arcs(path)) pose = drive(pose, arc, wheelbase_m);
   return pose;
 }
 

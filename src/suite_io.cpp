@@ -138,10 +138,14 @@ Suite load_suite_unguarded(const std::string& file) {
   for (std::size_t i = 0; i < list.size(); ++i) {
     const Where xw = ew.index(i);
     const YAML::Node node = list[i];
-    yaml::require_map(xw, node, {"name", "path", "measurements", "logs"});
+    yaml::require_map(xw, node, {"name", "path", "measurements", "logs", "group"});
     SuiteExperiment ex;
     ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
     if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate experiment name");
+    if (node["group"]) {
+      ex.group = yaml::to_string(xw.child("group"), node["group"]);
+      if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
+    }
     const bool has_measurements = node["measurements"].IsDefined();
     const bool has_logs = node["logs"].IsDefined();
     if (has_measurements == has_logs) {

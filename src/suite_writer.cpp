@@ -15,13 +15,25 @@ constexpr int kYamlDigits = 15;
 void emit_effects(YAML::Emitter& out, const EffectList& effects) {
   out << YAML::BeginSeq;
   for (const EffectSpec& e : effects) {
-    const EffectInfo* info = find_effect(e.name);
+    const EffectInfo* info = info_of(e);
     if (!info || info->parameters.size() != e.values.size()) {
       throw std::invalid_argument("suite_yaml: unknown effect or wrong parameter count: " + e.name);
     }
-    out << YAML::BeginMap << YAML::Key << e.name << YAML::Value << YAML::Flow << YAML::BeginMap;
+    out << YAML::BeginMap << YAML::Key << (e.custom ? "custom" : e.name) << YAML::Value << YAML::Flow
+        << YAML::BeginMap;
+    if (e.custom) out << YAML::Key << "name" << YAML::Value << e.name << YAML::Key << "parameters" << YAML::Value << YAML::BeginMap;
+    if (!e.target.empty()) out << YAML::Key << "parameter" << YAML::Value << e.target;
     for (std::size_t i = 0; i < e.values.size(); ++i) {
       out << YAML::Key << info->parameters[i].name << YAML::Value << e.values[i];
+    }
+    if (e.custom) {
+      out << YAML::EndMap;
+      const CustomEffect& def = *e.custom;
+      for (const auto& [key, x] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
+                                   std::pair{"scale_right", &def.scale_right},
+                                   std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+        if (!x->text.empty()) out << YAML::Key << key << YAML::Value << YAML::DoubleQuoted << x->text;
+      }
     }
     out << YAML::EndMap << YAML::EndMap;
   }
@@ -52,6 +64,7 @@ std::string suite_yaml(const SuiteDocument& suite) {
   out << YAML::Key << "experiments" << YAML::Value << YAML::BeginSeq;
   for (const SuiteDocument::Experiment& ex : suite.experiments) {
     out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << YAML::DoubleQuoted << ex.name;
+    if (!ex.group.empty()) out << YAML::Key << "group" << YAML::Value << YAML::DoubleQuoted << ex.group;
     if (!ex.logs.empty()) {
       out << YAML::Key << "logs" << YAML::Value << YAML::BeginSeq;
       for (const std::string& log : ex.logs) out << YAML::DoubleQuoted << log;

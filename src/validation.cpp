@@ -1,7 +1,10 @@
 #include "odomcov/validation.hpp"
 
 #include <algorithm>
+#include <limits>
+#include <string>
 
+#include "odomcov/limits.hpp"
 #include "odomcov/propagation.hpp"
 #include "odomcov/second_order.hpp"
 
@@ -16,6 +19,19 @@ OrderResult order2_result(const Config& config, const SampleMoments& sim, double
   std::vector<double> durations;
   const std::vector<ArcSegment> pieces =
       model_pieces(config.path, config.robot.wheelbase_m, &durations);
+  const std::size_t count = second_order_piece_count(pieces, config.robot.wheelbase_m);
+  if (count > kMaxSecondOrderPieces) {  // quadratic cost: not computed, never "consistent"
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    r.theory_mean = Vector3::Constant(nan);
+    r.theory_cov = Matrix3::Constant(nan);
+    r.theory_source = "order 2: not computed";
+    r.nees_mean = nan;
+    r.mean_test.valid = r.cov_test.valid = r.cov_lrt.valid = false;
+    r.verdict = Verdict::untestable("order 2 needs " + std::to_string(count) +
+                                    " quadrature pieces on this path, above the limit " +
+                                    std::to_string(kMaxSecondOrderPieces) + " (docs/bad-input.md)");
+    return r;
+  }
   const Prediction p = predict_second_order(pieces, durations, config.robot, config.model_effects);
   r.theory_mean = p.mean + p.noise_mean;
   r.theory_cov = p.cov;

@@ -53,13 +53,17 @@ WorldFile load_world_unguarded(const std::string& file) {
   for (std::size_t i = 0; i < list.size(); ++i) {
     const Where xw = ew.index(i);
     const YAML::Node node = list[i];
-    yaml::require_map(xw, node, {"name", "runs", "path"});
+    yaml::require_map(xw, node, {"name", "runs", "path", "group"});
     WorldExperiment ex;
     ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
     if (!std::regex_match(ex.name, safe_name)) {
       yaml::fail(xw.child("name"), node["name"], "use letters, digits, '_', '.' or '-' (it names a file)");
     }
     if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate name");
+    if (node["group"]) {
+      ex.group = yaml::to_string(xw.child("group"), node["group"]);
+      if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
+    }
     ex.runs = yaml::to_integer(xw.child("runs"), yaml::require(xw, node, "runs"), 2, kMaxWorldRuns);
     total_runs += ex.runs;
     if (total_runs > kMaxWorldRuns) {
@@ -80,7 +84,11 @@ WorldFile load_world_unguarded(const std::string& file) {
 std::vector<Vector3> synthesize(const WorldFile& w, std::size_t experiment, int threads) {
   const WorldExperiment& ex = w.experiments.at(experiment);
   const std::uint64_t seed = random::derive_seed(w.seed, experiment);
-  const Simulator simulator({w.robot.wheelbase_m, w.world.noise}, ex.path, w.world.effects);
+  SuiteExperiment as_suite;
+  as_suite.name = ex.name;
+  as_suite.group = ex.group;
+  const EffectList effects = group_effects(w.world.effects, w.seed, group_key(as_suite));
+  const Simulator simulator({w.robot.wheelbase_m, w.world.noise}, ex.path, effects);
   const std::vector<Vector3> errors = simulator.errors(seed, 0, ex.runs, threads);
   const Vector3 odometry = simulator.odometry_end_pose();
   const auto key = random::key_from_seed(seed);
@@ -106,7 +114,7 @@ SuiteDocument world_suite(const WorldFile& w) {
   doc.robot = w.robot;
   doc.measurement_noise = w.measurement_noise;
   for (const WorldExperiment& ex : w.experiments) {
-    doc.experiments.push_back({ex.name, ex.path_yaml, ex.name + ".csv", {}});
+    doc.experiments.push_back({ex.name, ex.path_yaml, ex.name + ".csv", {}, ex.group});
   }
   return doc;
 }

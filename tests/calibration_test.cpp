@@ -4,12 +4,15 @@
 
 #include <gtest/gtest.h>
 
+#include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/normal.hpp>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 
 #include "odomcov/error.hpp"
 #include "odomcov/world.hpp"
+#include "test_util.hpp"
 
 namespace odomcov {
 namespace {
@@ -17,10 +20,9 @@ namespace {
 constexpr double kAlpha = 1e-3;
 const std::string kWorlds = ODOMCOV_SOURCE_DIR "/tests/data/worlds/";
 
-/// Synthesises a world into a temporary directory and loads the suite back.
+/// Synthesises a world into a scratch directory of this build tree and loads the suite back.
 Suite synth_suite(const WorldFile& w, const std::string& tag) {
-  const auto dir = std::filesystem::temp_directory_path() / ("odomcov_cal_" + tag);
-  std::filesystem::create_directories(dir);
+  const auto dir = test::scratch_dir("odomcov_cal_" + tag);
   for (std::size_t i = 0; i < w.experiments.size(); ++i) {
     std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
   }
@@ -33,14 +35,26 @@ TEST(Compare, PlainWorldIsConsistentAndHiddenEffectsAreNamed) {
   const Comparison ok = compare(plain, suite_model(plain), kAlpha);
   EXPECT_EQ(ok.verdict, "consistent");
   EXPECT_TRUE(ok.failures.empty());
-  for (const ExperimentComparison& e : ok.experiments) EXPECT_NEAR(e.nees_mean, 3.0, 1.5) << e.name;
+  // With the model right, each run's NEES is chi^2_3 (its predicted mean and covariance are
+  // known, not estimated), so n times an experiment's NEES mean is chi^2_{3n}. Bound: its
+  // two-sided quantiles at kAlpha, split over the experiments (Bonferroni).
+  const double tail = kAlpha / (2.0 * static_cast<double>(ok.experiments.size()));
+  for (const ExperimentComparison& e : ok.experiments) {
+    const boost::math::chi_squared chi2(3.0 * static_cast<double>(e.n));
+    const double n = static_cast<double>(e.n);
+    EXPECT_GT(e.nees_mean, boost::math::quantile(chi2, tail) / n) << e.name;
+    EXPECT_LT(e.nees_mean, boost::math::quantile(boost::math::complement(chi2, tail)) / n) << e.name;
+  }
 
   const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "std");
   const Comparison bad = compare(lab, suite_model(lab), kAlpha);
   EXPECT_EQ(bad.verdict, "inconsistent");
   ASSERT_FALSE(bad.failures.empty());
   // The wheelbase error shows first on the long spin, as a heading mean.
-  EXPECT_EQ(bad.failures.front().rfind("spin-cw-720: theta mean", 0), 0u) << bad.failures.front();
+  const Failure& worst = bad.failures.front();
+  EXPECT_EQ(worst.kind, Failure::Kind::mean);
+  EXPECT_EQ(bad.experiments.at(static_cast<std::size_t>(worst.experiment)).name, "spin-cw-720");
+  EXPECT_EQ(worst.component, 2);  // theta
   // With the hidden effects in the model, the same data are consistent.
   SuiteModel informed = suite_model(lab);
   informed.effects = {{"wheel_diameter_ratio", {1.003}}, {"wheelbase_error", {1.01}}};
@@ -117,10 +131,69 @@ TEST(Umbmark, RecoversEdAndEbWithBorensteinsSigns) {
   EXPECT_NEAR(r.Eb - 1.0, -0.01, order * 0.01);
   EXPECT_LT(r.alpha, 0.0);  // a short wheelbase over-turns
   EXPECT_GT(r.beta, 0.0);   // a larger right wheel curves left
-  EXPECT_NEAR(r.c_left, 2 / (r.Ed + 1), 1e-15);
-  EXPECT_NEAR(r.wheelbase_corrected, 0.4 * r.Eb, 1e-15);
+  // The corrected wheelbase against the world's true one (B Eb = 0.4 x 0.99), within the same
+  // first-order approximation (it was compared with 0.4 r.Eb, its own formula).
+  EXPECT_NEAR(r.wheelbase_corrected, 0.4 * 0.99, order * 0.4 * 0.01);
   EXPECT_LT(r.emax_after, 0.05 * r.emax_before);
   EXPECT_THROW(umbmark(suite, "ccw", "cw", std::nullopt), InputError);
+}
+
+/// The suite's runs as encoder logs: one row per sample of the planned path (cumulative wheel
+/// travel at full precision), the measured end pose on the last row.
+Suite as_logged_suite(const Suite& suite, const std::string& tag) {
+  const auto dir = test::scratch_dir("odomcov_cal_logs_" + tag);
+  std::string yaml = "name: " + suite.name + "-logged\n" + robot_yaml(suite.robot) + "\nexperiments:\n";
+  for (const SuiteExperiment& ex : suite.experiments) {
+    yaml += "  - name: " + ex.name + "\n    logs: [";
+    for (const SuiteRun& run : ex.runs) {
+      const std::string file = ex.name + "-" + run.id + ".csv";
+      std::ofstream log(dir / file);
+      log << "t,left,right,x,y,theta\n";
+      char row[256];
+      double t = 0, left = 0, right = 0;
+      std::snprintf(row, sizeof row, "%.17g,%.17g,%.17g,,,\n", t, left, right);
+      log << row;
+      const std::vector<SampleRun> schedule = sample_schedule(ex.path);
+      for (std::size_t s = 0; s < schedule.size(); ++s) {
+        for (std::int64_t k = 0; k < schedule[s].count; ++k) {
+          t += schedule[s].duration_s, left += schedule[s].increment.left_m;
+          right += schedule[s].increment.right_m;
+          const bool last = s + 1 == schedule.size() && k + 1 == schedule[s].count;
+          if (last) {
+            std::snprintf(row, sizeof row, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", t, left, right,
+                          run.measured.x(), run.measured.y(), run.measured.z());
+          } else {
+            std::snprintf(row, sizeof row, "%.17g,%.17g,%.17g,,,\n", t, left, right);
+          }
+          log << row;
+        }
+      }
+      yaml += (&run == &ex.runs.front() ? "" : ", ") + file;
+    }
+    yaml += "]\n";
+  }
+  std::ofstream(dir / "suite.yaml") << yaml;
+  return load_suite((dir / "suite.yaml").string());
+}
+
+// UMBmark on logged runs: the same squares given as encoder logs (one row per sample) give the
+// UMBmark of the planned paths. The only differences are the rounding of summed samples (the
+// planned path drives a run of equal samples as one arc), far below 1e-9 in each figure.
+TEST(Umbmark, LoggedRunsGiveThePlannedPathsResult) {
+  const Suite planned = synth_suite(load_world(kWorlds + "squares.yaml"), "squares_planned");
+  const Suite logged = as_logged_suite(planned, "squares");
+  ASSERT_TRUE(logged.experiments[0].logged);
+  EXPECT_THROW(umbmark(logged, "cw", "ccw", std::nullopt), InputError);  // the side is not known
+  const UmbmarkResult a = umbmark(planned, "cw", "ccw", std::nullopt);
+  const UmbmarkResult b = umbmark(logged, "cw", "ccw", 4.0);
+  EXPECT_EQ(b.runs_cw, a.runs_cw);
+  EXPECT_EQ(b.runs_ccw, a.runs_ccw);
+  EXPECT_NEAR(b.alpha, a.alpha, 1e-9);
+  EXPECT_NEAR(b.beta, a.beta, 1e-9);
+  EXPECT_NEAR(b.Ed, a.Ed, 1e-9);
+  EXPECT_NEAR(b.Eb, a.Eb, 1e-9);
+  EXPECT_NEAR(b.emax_before, a.emax_before, 1e-9);
+  EXPECT_NEAR(b.emax_after, a.emax_after, 1e-9);
 }
 
 }  // namespace

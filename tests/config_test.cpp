@@ -11,14 +11,15 @@
 #include <fstream>
 
 #include "odomcov/error.hpp"
+#include "test_util.hpp"
 
 namespace odomcov {
 namespace {
 
 std::string write_temp(const std::string& text) {
-  char name[] = "/tmp/odomcov_config_XXXXXX";
-  const int fd = mkstemp(name);
-  close(fd);
+  static int count = 0;
+  static const std::filesystem::path dir = test::scratch_dir("odomcov_config");
+  const std::string name = (dir / ("config-" + std::to_string(++count) + ".yaml")).string();
   std::ofstream(name) << text;
   return name;
 }

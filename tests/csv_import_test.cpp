@@ -10,6 +10,7 @@
 #include <fstream>
 
 #include "odomcov/error.hpp"
+#include "test_util.hpp"
 #include "odomcov/format.hpp"
 #include "odomcov/suite.hpp"
 
@@ -81,8 +82,7 @@ std::string reference_cells(const Trajectory& tr, double t) {
 class CsvImport : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("odomcov_csv_import_" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
+    dir_ = test::scratch_dir("odomcov_csv_import");
     fs::create_directories(dir_ / "lab");
   }
   void TearDown() override { fs::remove_all(dir_); }
@@ -141,6 +141,34 @@ TEST_F(CsvImport, WorldFrameReferenceAndTicks) {
   EXPECT_NEAR(wrap_angle(ex.runs[0].measured.z() - expected.z()), 0.0, 1e-9);
   const Vector3 error = run_error(ex, ex.runs[0], kWheelbaseM);
   EXPECT_LT(error.cwiseAbs().maxCoeff(), 1e-9) << error.transpose();
+}
+
+// Unix timestamps at 1 kHz: 1.7e9 s with millisecond steps needs 13 significant digits. The
+// importer writes times (and every other number) at full precision (%.17g), so consecutive rows
+// stay distinct and the suite loads back; at %.12g they became equal ("time must increase").
+TEST_F(CsvImport, UnixTimestampsAtOneKilohertzLoadBack) {
+  const double t0 = 1.7e9;
+  const Trajectory tr = test_path(t0);
+  std::string text = "t,left,right,x,y,theta\n";
+  const double end = tr.keyframes.back().t_s - t0;
+  for (int k = 0; k * 0.001 <= end + 1e-9; ++k) {
+    const double t = t0 + k * 0.001;
+    const Keyframe w = tr.wheels(t);
+    text += num(t) + "," + num(w.left_m) + "," + num(w.right_m);
+    text += (k % 20 == 0 || (k + 1) * 0.001 > end + 1e-9) ? "," + reference_cells(tr, t) : ",,,";
+    text += "\n";
+  }
+  write("lab/run-01.csv", text);
+  CsvImportOptions o;
+  o.inputs = {(dir_ / "lab").string()};
+  o.wheelbase_m = kWheelbaseM;
+  const Suite suite = import(o);
+  ASSERT_EQ(suite.experiments.size(), 1u);
+  const SuiteRun& run = suite.experiments[0].runs.at(0);
+  EXPECT_GT(run.pieces.size(), 7000u);
+  for (double dt : run.durations_s) ASSERT_GT(dt, 0.0);
+  const Vector3 error = run_error(suite.experiments[0], run, kWheelbaseM);
+  EXPECT_LT(error.cwiseAbs().maxCoeff(), 1e-6) << error.transpose();
 }
 
 /// The reference starts before the wheels and runs on its own clock (reference-only rows): the

@@ -101,8 +101,8 @@ TEST(FastPath, DiagnoseMatchesExact) {
   const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "diag");
   SuiteModel model = suite_model(lab);
   model.effects = {{"wheel_diameter_ratio", {1.0}}};
-  const Diagnosis exact = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, FitPath::exact);
-  const Diagnosis fast = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, FitPath::fast);
+  const Diagnosis exact = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, {}, FitPath::exact);
+  const Diagnosis fast = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, {}, FitPath::fast);
   ASSERT_EQ(fast.candidates.size(), exact.candidates.size());
   ASSERT_TRUE(exact.best.has_value());
   ASSERT_TRUE(fast.best.has_value());

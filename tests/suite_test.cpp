@@ -5,8 +5,13 @@
 
 #include "odomcov/likelihood.hpp"
 
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+
 #include "odomcov/error.hpp"
 #include "odomcov/optiodom.hpp"
+#include "test_util.hpp"
 
 namespace odomcov {
 namespace {
@@ -77,6 +82,57 @@ TEST(OptiOdom, ImportsTicksAsMetresAndGroupsByDirection) {
   EXPECT_NEAR(summary[1].mean_travel_m, 40 * 100 * M_PI * 0.08 / 1000, 1e-12);
   EXPECT_NEAR(summary[0].mean_turn_rad, -20 * 100 * M_PI * 0.08 / 1000 / 0.2, 1e-12);
   EXPECT_NE(files.back().text.find("robot: {wheelbase: 0.2"), std::string::npos);
+}
+
+// The metadata row "Di,D1,D2" gives the diameter of the wheel of the first encoder column (odoR,
+// column 5 of a run file) first, then that of odoL (column 6) [Sousa22]. With D1 = 0.08 m and
+// D2 = 0.06 m and equal ticks on both wheels, the right wheel travels 4/3 as far as the left: the
+// robot turns left (counter-clockwise). Swapping the two diameters would make it turn right.
+// The scatter log-likelihood of three runs with full covariances (two share one), plus an
+// experiment of one run, which says nothing about the spread (0). The golden value comes from
+// tests/data/golden/scatter_likelihood.py: exact rational arithmetic (cofactor inverse and
+// determinant) and 40-digit logarithms, independent of Eigen and of the Cholesky factor used
+// here. The tolerance is a few hundred ulps of the terms (about 50 in magnitude).
+TEST(Likelihood, ScatterGoldenValue) {
+  Matrix3 s1, s2;
+  s1 << 1e-4, 2e-5, 1e-6, 2e-5, 4e-4, -3e-6, 1e-6, -3e-6, 1e-6;
+  s2 << 2e-4, 0, 0, 0, 1e-4, 5e-6, 0, 5e-6, 4e-6;
+  const std::vector<std::vector<RunResidual>> res{
+      {{{0.01, 0.02, 0.003}, {0.001, 0, 0}, s1},
+       {{-0.005, 0.01, 0.001}, {0.001, 0, 0}, s1},
+       {{0.002, -0.004, -0.002}, {0.0005, 0.001, 0}, s2}},
+      {{{0.5, 0.5, 0.5}, {0, 0, 0}, s2}}};
+  EXPECT_NEAR(scatter_log_likelihood(res), 20.091428794250649618, 1e-12);
+  const std::vector<double> terms = run_log_likelihoods(res, true);
+  ASSERT_EQ(terms.size(), 4u);
+  EXPECT_EQ(terms[3], 0.0);
+}
+
+TEST(OptiOdom, FirstDiameterIsTheRightWheel) {
+  const auto session = test::scratch_dir("optiodom_order") / "square" / "20000104";
+  std::filesystem::create_directories(session);
+  std::ofstream(session / "20000104_metadata.csv")
+      << "type,diff,,\nngear,10,,\nencRes,100,,\nLi,0.2,,\nDi,0.08,0.06\nN,1,,\n";
+  std::ofstream run(session / "20000104_run-01.csv");
+  run << "0,0,0,0,0,0\n";
+  for (int i = 1; i <= 30; ++i) run << 0.05 * i << ",0,0,0,100,100\n";
+  run.close();
+  OptiOdomOptions o;
+  o.sessions = {session.string()};
+  std::vector<ImportSummary> summary;
+  const std::vector<ImportedFile> files = import_optiodom(o, &summary);
+  ASSERT_EQ(summary.size(), 1u);
+  EXPECT_EQ(summary[0].experiment, "square-20000104-ccw");
+  // 30 cycles x 100 ticks x pi D / (10 x 100) m per tick on each wheel.
+  const double left = 30 * 100 * M_PI * 0.06 / 1000, right = 30 * 100 * M_PI * 0.08 / 1000;
+  EXPECT_NEAR(summary[0].mean_turn_rad, (right - left) / 0.2, 1e-12);
+  // The log's last row: t, left, right (metres), then the reference.
+  const std::string& log = files.front().text;
+  const std::string last = log.substr(log.rfind('\n', log.size() - 2) + 1);
+  double t = 0, l = 0, r = 0;
+  ASSERT_EQ(std::sscanf(last.c_str(), "%lf,%lf,%lf", &t, &l, &r), 3) << last;
+  EXPECT_NEAR(l, left, 1e-12);
+  EXPECT_NEAR(r, right, 1e-12);
 }
 
 TEST(OptiOdom, MalformedSessionsFailClearly) {

@@ -1,14 +1,61 @@
-// Helpers shared by the tests: matrix comparison and seeded random paths.
+// Helpers shared by the tests: matrix comparison, seeded random paths, portable normal draws and
+// per-build-tree scratch directories.
 #pragma once
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "odomcov/path.hpp"
 
 namespace odomcov::test {
+
+/// A fresh, empty directory for one test's files, inside this build tree (ODOMCOV_TEST_DIR, set
+/// by tests/CMakeLists.txt) and named with the process id: two build trees, or two tests run in
+/// parallel by ctest, never share one.
+inline std::filesystem::path scratch_dir(const std::string& name) {
+  const std::filesystem::path dir =
+      std::filesystem::path(ODOMCOV_TEST_DIR) / (name + "-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+/// Standard normal draws that are the same with every standard library: the Box-Muller transform
+/// of the raw 64-bit outputs of std::mt19937_64 (a sequence the C++ standard fixes), where
+/// std::normal_distribution's algorithm is left to the implementation (libstdc++ and libc++
+/// differ), so fixed-seed tests would not be portable.
+class PortableNormal {
+ public:
+  double operator()(std::mt19937_64& rng) {
+    if (has_spare_) {
+      has_spare_ = false;
+      return spare_;
+    }
+    constexpr double kTwoPow53 = 9007199254740992.0;
+    const double u1 = (static_cast<double>(rng() >> 11) + 1.0) / kTwoPow53;  // (0, 1]
+    const double u2 = static_cast<double>(rng() >> 11) / kTwoPow53;          // [0, 1)
+    const double r = std::sqrt(-2.0 * std::log(u1));
+    spare_ = r * std::sin(2.0 * M_PI * u2);
+    has_spare_ = true;
+    return r * std::cos(2.0 * M_PI * u2);
+  }
+
+ private:
+  double spare_ = 0.0;
+  bool has_spare_ = false;
+};
+
+/// Exponential(1) draws from the raw outputs of std::mt19937_64, for the same reason.
+inline double portable_exponential(std::mt19937_64& rng) {
+  return -std::log((static_cast<double>(rng() >> 11) + 1.0) / 9007199254740992.0);
+}
 
 /// max |a - b| / max(max |b|, floor): the norm-relative difference used for matrices whose
 /// entries span several orders of magnitude (or contain exact zeros).

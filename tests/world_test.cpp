@@ -9,6 +9,7 @@
 
 #include "odomcov/simulator.hpp"
 #include "odomcov/suite.hpp"
+#include "test_util.hpp"
 
 namespace odomcov {
 namespace {
@@ -16,8 +17,7 @@ namespace {
 const std::string kWorld = ODOMCOV_SOURCE_DIR "/tests/data/worlds/small.yaml";
 
 std::string write_suite(const WorldFile& w, const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / name;
-  std::filesystem::create_directories(dir);
+  const auto dir = test::scratch_dir(name);
   for (std::size_t i = 0; i < w.experiments.size(); ++i) {
     std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
   }

@@ -27,7 +27,8 @@ const std::vector<RobotParameter>& robot_parameters();
 /// Names a fit can take: "k_left", "k_right", "wheelbase" (the nominal one, which the odometry
 /// uses) and "<effect>.<parameter>" for any catalogue effect. An effect not yet in the model is
 /// added, starting from its typical size. Returns "" or what is wrong.
-std::string check_fit_parameter(const std::string& name);
+/// `context`: the model's effects, whose custom effects' parameters may also be fitted.
+std::string check_fit_parameter(const std::string& name, const EffectList& context = {});
 
 /// What a fit maximises: the full Gaussian likelihood, or its scatter part only
 /// (scatter_log_likelihood), for parameters that act on the covariance alone.

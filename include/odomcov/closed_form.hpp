@@ -46,6 +46,11 @@ Vector3 arc_displacement(double center_m, double angle_rad);
 ///   [   0       0         1        ]
 Matrix3 arc_transition(double center_m, double angle_rad);
 
+/// The wheel-error variances (left, right) of one piece under the model of [Kleeman95]: each
+/// wheel's error has variance k^2 |travel|. The one place this law is written (the closed form,
+/// the engine and the simulator all use it).
+Eigen::Vector2d wheel_variances(const ArcSegment& seg, const WheelNoise& k);
+
 /// Noise intensity of [Kleeman95, eq. (38)] over the whole segment: the covariance of
 /// (e_dtheta, e_d) = ((e_R - e_L)/B, (e_L + e_R)/2) accumulated over the segment, for
 /// independent wheel errors of variance k^2 |travel|:

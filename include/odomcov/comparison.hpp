@@ -26,11 +26,32 @@ struct ExperimentComparison {
   double log_likelihood = 0.0;
   Verdict verdict;
   std::vector<Vector3> errors;  // each run's error (measured - odometry), in order
-  // Per component (x, y, theta), for the plain-words failures:
+  // Per component (x, y, theta), for the failures:
   Vector3 mean_t = Vector3::Zero();        // (measured - predicted mean)/standard error
   Vector3 mean_p = Vector3::Ones();        // Student-t p-values
   Vector3 variance_ratio = Vector3::Ones();  // measured / predicted variance
   Vector3 variance_p = Vector3::Ones();    // chi^2 p-values (two-sided)
+
+  /// Correlation of components a and b (0 x, 1 y, 2 theta), measured and predicted.
+  double measured_correlation(int a, int b) const;
+  double predicted_correlation(int a, int b) const;
+};
+
+/// One way the model fails the data, as data; the command line and the Python module put it
+/// in words (src/cli/failures.cpp). Components: 0 x, 1 y, 2 theta.
+struct Failure {
+  enum class Kind {
+    mean,         // experiment's mean of `component` off the prediction (mean_t, mean_p)
+    variance,     // its variance off (variance_ratio, variance_p)
+    correlation,  // the covariance test fails with no variance off: the correlation of
+                  // (component, other) differs most
+    spread,       // the NEES test fails (fewer than 10 runs): the errors' overall spread
+    tails         // the suite's Mardia kurtosis (experiment = -1)
+  };
+  Kind kind = Kind::mean;
+  int experiment = -1;  // index into Comparison::experiments
+  int component = 0;
+  int other = 0;
 };
 
 struct Comparison {
@@ -43,7 +64,7 @@ struct Comparison {
   double kurtosis_scale = 1.0;   // pooled b2/E b2 when the covariance LRTs were kurtosis-scaled
   double log_likelihood = 0.0;
   Verdict verdict;
-  std::vector<std::string> failures;  // plain words, worst experiment first
+  std::vector<Failure> failures;  // worst experiment first
 };
 
 /// The model against every experiment of the suite ("where it fails" included). The kurtosis

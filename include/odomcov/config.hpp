@@ -38,6 +38,10 @@ struct Config {
 /// Reads and validates a path config. Throws InputError (file:line: key: what) on bad input.
 Config load_config(const std::string& file);
 
+/// Reads a YAML file that is a list of effects, catalogue or custom (diagnose --candidates).
+/// Throws InputError (file:line: key: what) on bad input.
+EffectList load_effects(const std::string& file);
+
 /// Rejects a runs count outside [1, kMaxRuns] or a job above kMaxSimulationSteps.
 void check_simulation_size(const std::string& file, int line, const std::string& key,
                            std::int64_t runs, std::int64_t samples_per_run);

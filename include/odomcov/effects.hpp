@@ -4,6 +4,8 @@
 // its implementations live in src/effects/, one file per effect.
 #pragma once
 
+#include <memory>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -14,14 +16,21 @@ namespace odomcov {
 /// At most this many effects in one list: each has its own random-stream slot (random.hpp).
 inline constexpr std::size_t kMaxEffects = 16;
 
-/// One effect with its parameter values, in the catalogue's parameter order.
+struct CustomEffect;
+
+/// One effect with its parameter values, in the catalogue's parameter order (for a custom
+/// effect, in the order of its definition's parameters).
 struct EffectSpec {
   std::string name;
   std::vector<double> values;
+  /// group_variation only: the parameter it varies between groups, "<effect>.<parameter>" of
+  /// another effect in the same list (e.g. "wheelbase_error.Eb"); empty for every other effect.
+  std::string target = {};
+  /// The definition of a custom effect (docs/effects.md, "Custom effects"); null for a
+  /// catalogue effect.
+  std::shared_ptr<const CustomEffect> custom = nullptr;
 
-  bool operator==(const EffectSpec& other) const {
-    return name == other.name && values == other.values;
-  }
+  bool operator==(const EffectSpec& other) const;
 };
 using EffectList = std::vector<EffectSpec>;
 
@@ -34,6 +43,10 @@ struct EffectParameterInfo {
   bool open_upper = false;
   double neutral = 0.0;  // the value at which the effect does nothing
   double typical = 0.0;  // a moderate size, e.g. for starting a fit
+  /// True for a size that plausibly changes between groups of runs (days, loads) even when the
+  /// model does not have its effect yet (wheelbase_error.Eb, wheel_diameter_ratio.Ed: tyre
+  /// pressure, load): diagnose then tries group_variation of it.
+  bool varies_between_groups = false;
 };
 
 /// How a fit moves one parameter: the coordinate u its optimiser sees (v = f(u)), the box and
@@ -73,6 +86,10 @@ struct EffectInfo {
   /// True when the effect makes the errors non-Gaussian (heavy tails): a model with it expects
   /// the kurtosis compare tests for.
   bool heavy_tails = false;
+  /// True when the effect acts across the runs of a group (group_variation): it is not seen by
+  /// one run alone, so the simulator of one path and the model of one run leave it out; synth
+  /// draws it per group and the suite likelihood correlates the runs of a group (likelihood.hpp).
+  bool grouped = false;
   // ---- What diagnose needs to know (so that diagnosis and calibration hold no effect names).
   /// The parameters diagnose fits for this candidate; empty: all of them (bumps: rate only, as
   /// a Gaussian likelihood sees rate and sigma only through rate sigma^2).
@@ -84,10 +101,63 @@ struct EffectInfo {
   std::string confused_with{};
 };
 
+/// A custom effect, defined in YAML: its own parameters and up to four expressions over the
+/// per-sample variables (custom_effect_variables) and the parameters, evaluated by muparser.
+/// An empty expression means 1. true travel of each wheel = scale x scale_<wheel> x encoder,
+/// true wheelbase = wheelbase_factor x nominal. Build it with define_custom_effect.
+struct CustomEffect {
+  /// One expression and where it was written (file, line, dotted key) for runtime errors.
+  struct Expression {
+    std::string text;  // "" = 1
+    std::string file;
+    int line = 0;
+    std::string key;
+  };
+  std::string name;
+  std::vector<std::string> parameters;
+  std::string file;  // where the definition was written, for messages
+  int line = 0;
+  std::string key;
+  Expression scale, scale_left, scale_right, wheelbase_factor;
+  /// The description fit and diagnose use: parameters unbounded and signed (identity fit
+  /// transform), neutral at the starting value; systematic.
+  EffectInfo info;
+  /// What the expressions depend on, set by define_custom_effect: 0 nothing, 1 the increment
+  /// (v, kappa, r, dir, turn), 2 the history (s, t).
+  int dependence = 0;
+
+  bool operator==(const CustomEffect& other) const;
+};
+
+/// The per-sample variables a custom effect's expressions may use, in the SPEC's order:
+/// v, kappa, r, dir, turn, s, t.
+const std::vector<std::string>& custom_effect_variables();
+
+/// "" when `text` compiles with the variables and these parameter names, else muparser's
+/// message (e.g. "Unexpected token \"x\" found at position 4.").
+std::string check_custom_expression(const std::string& text,
+                                    const std::vector<std::string>& parameters);
+
+/// "" when `name` can name a custom effect or one of its parameters (an identifier of letters,
+/// digits and '_', not starting with a digit, not a variable's name), else why not.
+std::string check_custom_name(const std::string& name);
+
+/// Builds a custom effect definition and its spec with the starting values. Throws InputError
+/// (file, line and key of the offending expression) for a bad expression or name, or a name
+/// that clashes with a catalogue effect.
+EffectSpec define_custom_effect(CustomEffect definition, const std::vector<double>& start);
+
 /// Every effect of the catalogue, in the order of docs/formats.md.
 const std::vector<EffectInfo>& effect_catalogue();
-/// nullptr when unknown.
-const EffectInfo* find_effect(const std::string& name);
+/// The one lookup of an effect by name: a custom effect defined in `context` (a model's or a
+/// candidate list's effects) first, then the catalogue; nullptr when unknown.
+const EffectInfo* find_effect(const std::string& name, const EffectList& context = {});
+/// The description of a spec: its custom definition's, or the catalogue's (nullptr when
+/// unknown).
+const EffectInfo* info_of(const EffectSpec& spec);
+/// The spec named `name` in `list`; nullptr when absent.
+const EffectSpec* find_spec(const EffectList& list, const std::string& name);
+EffectSpec* find_spec(EffectList& list, const std::string& name);
 
 /// "" when the values are valid for the effect, else what is wrong ("Ed must be > 0").
 std::string check_effect(const EffectSpec& spec);
@@ -102,12 +172,37 @@ class EffectError : public InputError {
   EffectError(const std::string& key, const std::string& what) : InputError("", 0, key, what) {}
 };
 
-/// Throws EffectError unless every spec passes check_effect, no name repeats and the list has
+/// The name of the one effect that varies another effect's parameter between groups.
+inline constexpr const char* kGroupVariation = "group_variation";
+
+/// "" when the list's group_variation (if any) names a parameter of another effect in the list
+/// that moves the mean (a systematic effect), else what is wrong.
+std::string check_group_target(const EffectList& list);
+
+/// Where a list's group_variation points: the varied effect's index in the list, the index of
+/// the parameter within it, and the between-group std-dev. `present` is false without one.
+struct GroupTarget {
+  bool present = false;
+  std::size_t effect = 0, parameter = 0;
+  double sd = 0.0;
+};
+GroupTarget group_target(const EffectList& list);
+
+/// The effects one group of runs sees (world side): the list without group_variation, its
+/// target parameter drawn from N(value, sd^2) by a counter-based draw keyed on (seed, group
+/// name), so every experiment of a group gets the same value whatever the order or thread
+/// count. Throws EffectError when the draw leaves the parameter's range (sd far too large).
+EffectList group_effects(const EffectList& list, std::uint64_t seed, const std::string& group);
+
+/// Throws EffectError unless every spec passes check_effect, no name repeats, a group_variation
+/// names a systematic parameter of the list (check_group_target) and the list has
 /// at most kMaxEffects entries. Every entry point that builds effects (Simulator, predict,
 /// resolve) calls it.
 void check_effects(const EffectList& list);
 
-/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}".
+/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}" or
+/// "- group_variation: {parameter: wheelbase_error.Eb, sd: 0.002}", or for a custom effect its
+/// whole definition with the current values as starting values, on one line.
 std::string effect_yaml(const EffectSpec& spec);
 
 }  // namespace odomcov

@@ -22,14 +22,20 @@ inline constexpr double kMaxSimulationSteps = 1e12;
 /// Pieces the propagation engine cuts a planned path into (model_pieces: one per 0.25 m or
 /// 0.25 rad): bounds the engine's memory (about 100 bytes a piece) and time.
 inline constexpr double kMaxModelPieces = 1'000'000;
+/// Quadrature pieces of one order-2 prediction (1 m or 0.25 rad each, about 4000 m of line):
+/// its double integral is quadratic in them (4000 pieces: about 10 s on one core). Beyond it,
+/// `run` reports order 2 as untestable and commands with --order 2 refuse the suite.
+inline constexpr std::size_t kMaxSecondOrderPieces = 4'000;
 /// Runs of all experiments of one world file together (synth holds one experiment's runs and
 /// writes a CSV row per run: 1e6 rows are about 70 MB).
 inline constexpr std::int64_t kMaxWorldRuns = 1'000'000;
 /// Points of one sweep grid (each is validated before any work starts).
 inline constexpr double kMaxSweepPoints = 10'000;
 /// Bytes of one input file: YAML (configs, suites, worlds, sweeps) and CSV (measurements, logs).
+/// The CSV limit holds what synth writes at kMaxWorldRuns (1e6 runs: 72 MB), so that every
+/// suite synth writes loads back.
 inline constexpr std::int64_t kMaxYamlBytes = 16 << 20;
-inline constexpr std::int64_t kMaxCsvBytes = 64 << 20;
+inline constexpr std::int64_t kMaxCsvBytes = 128 << 20;
 
 // --- Magnitudes ------------------------------------------------------------------------------
 /// Lengths: wheelbase, cumulative wheel travel, segment lengths and radii, measured positions,

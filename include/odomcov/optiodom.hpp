@@ -26,7 +26,9 @@ struct OptiOdomOptions {
 /// pose in the last row). Encoder ticks become metres as pi D / (ngear encRes): the data show
 /// no quadrature factor (README). Runs are grouped into experiments by path type (the session's
 /// parent folder), session and, for the calibration paths, turning direction (cw, ccw or
-/// straight from the sign of the encoders' total heading change).
+/// straight from the sign of the encoders' total heading change). Each experiment's `group` is
+/// its recording session: the evening its session directory (named DDMMYYYYhhmm, the start
+/// time) belongs to, as YYYY-MM-DD, a start before 06:00 counting to the evening before.
 std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
                                           std::vector<ImportSummary>* summary = nullptr);
 

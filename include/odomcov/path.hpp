@@ -82,6 +82,11 @@ struct SampleRun {
 };
 std::vector<SampleRun> sample_schedule(const Path& path);
 
+/// The encoder travel of a path as constant-curvature pieces: each run of equal samples of
+/// sample_schedule is one arc (count x increment), so odometry driven piece by piece equals the
+/// sampled odometry.
+std::vector<ArcSegment> sample_arcs(const Path& path);
+
 /// Total number of samples of a path (ceil(T f), with a 1e-9-sample tolerance).
 std::int64_t sample_count(const Path& path);
 

@@ -28,8 +28,8 @@ struct PathFeatures {
 /// (SuiteRun::durations_s). The one place that reads a run's motion for the residual analysis.
 PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
-/// The group an experiment belongs to, for the between-group test. The suite format has no
-/// `group:` key yet, so every experiment is its own group and the test is untestable.
+/// The group an experiment belongs to, for the between-group test: the suite's `group:` key
+/// (group_key: an experiment without one is a group of its own).
 std::string experiment_group(const SuiteExperiment& ex);
 
 /// The residual features, in the order of docs/json.md's list.

@@ -42,10 +42,19 @@ Prediction predict_second_order(const std::vector<ArcSegment>& pieces,
                                 const std::vector<double>& durations_s, const Robot& robot,
                                 const EffectList& effects);
 
+/// The number of quadrature pieces predict_second_order cuts `pieces` into (before any
+/// effect's split); above kMaxSecondOrderPieces (limits.hpp) it throws std::length_error.
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m);
+
 /// Merges consecutive pieces (e.g. the per-sample pieces of a logged run) into pieces that turn
 /// at most kPieceMaxAngle and travel at most kPieceMaxTravel, never merging across a reversal
 /// of either wheel.
 std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m);
+/// The same, with each coarse piece's duration (the sum of its pieces') in `coarse_durations_s`
+/// when `durations_s` is not empty.
+std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m,
+                                       const std::vector<double>& durations_s,
+                                       std::vector<double>* coarse_durations_s);
 
 /// The model of the given order (1: predict, the first-order engine; 2: the order-2 model) for
 /// any pieces. For order 2 on fine pieces (a logged run), the first order is taken on the fine

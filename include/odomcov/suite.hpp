@@ -32,7 +32,15 @@ struct SuiteExperiment {
   bool logged = false;  // runs carry their own encoder logs
   Path path;            // the planned path (path experiments only)
   std::vector<SuiteRun> runs;
+  /// The suite's `group:` (a session, a day): experiments with the same group share
+  /// group_variation's draw, so their runs are correlated. Empty: the experiment is a group of
+  /// its own (group_key).
+  std::string group;
 };
+
+/// The key that identifies an experiment's group: "group:<group>" when it has one, else
+/// "experiment:<name>" (a group of its own).
+std::string group_key(const SuiteExperiment& ex);
 
 struct Suite {
   std::string file;
@@ -69,6 +77,10 @@ std::string model_yaml(const SuiteModel& model);
 /// The odometry end pose of a run at `wheelbase_m`: its logged encoder travel integrated piece
 /// by piece, or the experiment's sampled path.
 Vector3 odometry_end_pose(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
+
+/// A run's encoder travel as constant-curvature pieces: the logged pieces, or the sampled
+/// path's arcs (sample_arcs).
+std::vector<ArcSegment> encoder_pieces(const SuiteExperiment& ex, const SuiteRun& run);
 
 /// The error as docs/conventions.md defines it at `wheelbase_m`: measured (true) - odometry, theta wrapped.
 Vector3 run_error(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);

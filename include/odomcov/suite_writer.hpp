@@ -29,6 +29,9 @@ struct SuiteDocument {
     std::string measurements;
     /// Logged experiments: one encoder log per run, relative to the suite file.
     std::vector<std::string> logs;
+    /// The experiment's group (written as `group:` when not empty): runs of one group share
+    /// group_variation's draw (a session, a day).
+    std::string group;
   };
   std::vector<Experiment> experiments;
 };

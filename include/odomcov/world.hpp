@@ -19,6 +19,7 @@ struct WorldExperiment {
   std::int64_t runs = 0;
   Path path;
   std::string path_yaml;  // the path block as written (YAML text), to copy into the suite
+  std::string group;      // `group:`, copied into the suite; empty: a group of its own
 };
 
 struct WorldFile {
@@ -35,7 +36,9 @@ struct WorldFile {
 WorldFile load_world(const std::string& file);
 
 /// The measured end poses (start frame) of experiment i: odometry end pose + simulated error,
-/// plus measurement noise. Experiment i uses a seed derived from (seed, i).
+/// plus measurement noise. Experiment i uses a seed derived from (seed, i); a group_variation
+/// is drawn per group from the world's seed and the group (group_effects), so the experiments
+/// of one group share it.
 std::vector<Vector3> synthesize(const WorldFile& world, std::size_t experiment, int threads = 0);
 
 /// The suite document of the synthesised data (see suite_writer.hpp), and its text.

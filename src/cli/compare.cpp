@@ -5,6 +5,7 @@
 
 #include "commands.hpp"
 #include "odomcov/comparison.hpp"
+#include "failures.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {
@@ -59,7 +60,7 @@ std::string comparison_text(const Suite& suite, const Comparison& c) {
       << "\nverdict: " << c.verdict << "\n";
   if (!c.failures.empty()) {
     out << "Where it fails (worst first):\n";
-    for (const std::string& f : c.failures) out << "  - " << f << "\n";
+    for (const std::string& f : failure_texts(c)) out << "  - " << f << "\n";
   }
   return out.str();
 }
@@ -93,7 +94,7 @@ json comparison_json(const Suite& suite, const Comparison& c) {
           {"kurtosis", kurtosis},
           {"log_likelihood", c.log_likelihood},
           {"verdict", c.verdict.name()},
-          {"failures", c.failures}};
+          {"failures", failure_texts(c)}};
 }
 
 namespace {
@@ -103,6 +104,7 @@ int run_compare(const CompareOptions& opt) {
   check_order(opt.order);
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
+  check_second_order_size(suite, opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
   const Comparison c = compare(suite, model, opt.alpha);

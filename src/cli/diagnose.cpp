@@ -1,10 +1,12 @@
-// odomcov diagnose SUITE.yaml [--effects a,b,...] [--alpha A] [--json FILE]
+// odomcov diagnose SUITE.yaml [--effects a,b,...] [--candidates FILE.yaml] [--alpha A] [--json FILE]
 // Which physical effect is the model missing? Fitted size, evidence, and the YAML to add it.
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <sstream>
 
 #include "commands.hpp"
+#include "odomcov/config.hpp"
 #include "odomcov/diagnosis.hpp"
 #include "odomcov/format.hpp"
 #include "output.hpp"
@@ -16,6 +18,7 @@ namespace {
 struct DiagnoseOptions {
   std::string suite;
   std::vector<std::string> effects;
+  std::string candidates;
   double alpha = kDiagnoseAlpha;
   std::string json;
   int order = 2;
@@ -37,18 +40,33 @@ json values_json(const Candidate& c, const std::vector<double>& values) {
 int run_diagnose(const DiagnoseOptions& opt) {
   check_alpha(opt.alpha);
   for (const std::string& e : opt.effects) {
-    if (!find_candidate(e)) throw UsageError("--effects: unknown effect '" + e + "'");
+    const std::string effect = e.substr(0, e.find('('));  // group_variation(wheelbase_error.Eb)
+    if (e != kWheelNoiseLevel && !find_effect(effect)) throw UsageError("--effects: unknown effect '" + e + "'");
   }
   if (!opt.json.empty()) check_output_path(opt.json);
   const Suite suite = load_suite(opt.suite);
+  const EffectList own = opt.candidates.empty() ? EffectList{} : load_effects(opt.candidates);
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    const int line = own[i].custom ? own[i].custom->line : 0;
+    if (find_spec(suite.model_effects, own[i].name)) {
+      throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
+                       "name clash: " + quote(own[i].name) + " is already in the suite's model");
+    }
+    if (own[i].values.empty()) {
+      throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
+                       "a candidate needs a parameter to fit (custom: parameters: {name: start})");
+    }
+  }
   check_order(opt.order);
+  check_second_order_size(suite, opt.order);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
+  check_finite_start(suite, model, "diagnosis");
   DiagnoseProgress progress;
   ProgressBar bar([&progress] { return progress.fits_done.load(); },
                   std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
                   "fits");
-  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress,
+  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress, own,
                                opt.exact ? FitPath::exact : FitPath::fast);
   bar.finish();
 
@@ -61,10 +79,14 @@ int run_diagnose(const DiagnoseOptions& opt) {
                                               " (Mardia kurtosis z = " + fixed(d.kurtosis.statistic, 2) +
                                               ", p = " + sci(d.kurtosis.p_value, 2) + ")"
                                         : std::string("not testable (no experiment has 10 runs)"))
-      << "\n\n  candidate                  d logL   (of)        d BIC   p-value     significant\n";
+      << "\n\n";
+  int width = 24;  // wider for group_variation(<effect>.<parameter>)
+  for (const Candidate& c : d.candidates) width = std::max(width, static_cast<int>(c.effect.size()));
+  out << "  " << std::string("candidate").append(static_cast<std::size_t>(width) - 9, ' ')
+      << "   d logL   (of)        d BIC   p-value     significant\n";
   for (const Candidate& c : d.candidates) {
-    char line[200];
-    std::snprintf(line, sizeof line, "  %-24s %10.2f %-8s %10.2f   %-10.3g  %s\n", c.effect.c_str(),
+    char line[300];
+    std::snprintf(line, sizeof line, "  %-*s %10.2f %-8s %10.2f   %-10.3g  %s\n", width, c.effect.c_str(),
                   c.delta_log_likelihood, c.systematic ? "full" : "scatter", c.delta_bic, c.p_value,
                   c.significant ? "yes" : "no");
     out << line;
@@ -167,6 +189,9 @@ void setup_diagnose(CLI::App& app, int& exit_code) {
                   "Candidates to try (default: every catalogue effect not in the model, and "
                   "wheel_noise_level)")
       ->delimiter(',');
+  cmd->add_option("--candidates", opt->candidates,
+                  "YAML list of your own candidate effects (custom, or catalogue ones with starting "
+                  "values), ranked beside the catalogue");
   cmd->add_option("--alpha", opt->alpha, "Family-wise significance level over the candidates")
       ->capture_default_str();
   cmd->add_option("--order", opt->order,

@@ -25,26 +25,21 @@ struct FitOptions {
 int run_fit(const FitOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
   if (opt.params.empty()) throw UsageError("--params needs at least one parameter");
+  check_order(opt.order);
+  const Suite suite = load_suite(opt.suite);
+  check_second_order_size(suite, opt.order);
+  // After loading: the suite's custom effects' parameters can be fitted too.
   for (std::size_t i = 0; i < opt.params.size(); ++i) {
-    if (const std::string e = check_fit_parameter(opt.params[i]); !e.empty()) {
+    if (const std::string e = check_fit_parameter(opt.params[i], suite.model_effects); !e.empty()) {
       throw UsageError("--params: " + e);
     }
     for (std::size_t j = 0; j < i; ++j) {
       if (opt.params[j] == opt.params[i]) throw UsageError("--params: " + opt.params[i] + " given twice");
     }
   }
-  check_order(opt.order);
-  const Suite suite = load_suite(opt.suite);
   SuiteModel model = suite_model(suite);
   model.order = opt.order;
-  // A start whose likelihood is not finite (no wheel noise and no measurement noise: a singular
-  // predicted covariance) gives the optimiser nothing to climb: refuse it plainly.
-  if (!std::isfinite(log_likelihood(residuals(suite, model)))) {
-    throw InputError(suite.file, 0, "robot",
-                     "the suite's model gives a log-likelihood of -inf (a singular predicted "
-                     "covariance: k_left = k_right = 0 and no measurement_noise?); give it some "
-                     "noise to start the fit from");
-  }
+  check_finite_start(suite, model, "fit");
   std::atomic<std::int64_t> evaluations{0};
   ProgressBar bar([&evaluations] { return evaluations.load(); },
                   std::function<std::int64_t()>([] { return std::int64_t{0}; }),

@@ -2,7 +2,10 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -10,6 +13,10 @@
 #include <vector>
 
 #include "odomcov/error.hpp"
+#include "odomcov/likelihood.hpp"
+#include "odomcov/limits.hpp"
+#include "odomcov/propagation.hpp"
+#include "odomcov/second_order.hpp"
 
 namespace odomcov::cli {
 
@@ -107,6 +114,31 @@ void check_order(int order) {
   if (order != 1 && order != 2) throw UsageError("--order must be 1 or 2");
 }
 
+void check_second_order_size(const Suite& suite, int order) {
+  if (order != 2) return;
+  const double B = suite.robot.wheelbase_m;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    std::size_t most = 0;
+    if (!ex.logged) most = second_order_piece_count(model_pieces(ex.path, B), B);
+    for (const SuiteRun& run : ex.logged ? ex.runs : std::vector<SuiteRun>{}) {
+      most = std::max(most, second_order_piece_count(coarsen_pieces(run.pieces, B), B));
+    }
+    if (most > kMaxSecondOrderPieces) {
+      throw InputError(suite.file, 0, "experiments." + ex.name,
+                       "order 2 needs " + std::to_string(most) + " quadrature pieces here, above the limit " +
+                           std::to_string(kMaxSecondOrderPieces) + " (its cost is quadratic); use --order 1");
+    }
+  }
+}
+
+void check_finite_start(const Suite& suite, const SuiteModel& model, const std::string& what) {
+  if (std::isfinite(log_likelihood(residuals(suite, model)))) return;
+  throw InputError(suite.file, 0, "robot",
+                   "the suite's model gives a log-likelihood of -inf (a singular predicted "
+                   "covariance: k_left = k_right = 0 and no measurement_noise?); give it some "
+                   "noise to start the " + what + " from");
+}
+
 void check_threads(int threads) {
   if (threads < 0 || threads > kMaxThreads) {
     throw UsageError("--threads must be in [0, " + std::to_string(kMaxThreads) + "] (0 = all cores)");
@@ -181,10 +213,16 @@ void StagedDir::write(const std::string& relative, const std::string& text) {
   const fs::path path = fs::path(tmp_) / relative;
   std::error_code ec;
   fs::create_directories(path.parent_path(), ec);
+  errno = 0;
   std::ofstream file(path, std::ios::binary | std::ios::trunc);
   file << text;
   file.flush();
-  if (ec || !file) throw UsageError("--out: cannot write " + one_line(path.string(), 200));
+  if (ec || !file) {
+    // Named by where it was going (the staging directory is removed), with the system's reason.
+    const std::string why = ec ? ec.message() : errno != 0 ? std::strerror(errno) : "write failed";
+    throw UsageError("--out: cannot write " + one_line((fs::path(out_) / relative).string(), 200) +
+                     " (" + why + "); nothing was written");
+  }
 }
 
 void StagedDir::commit() {

@@ -8,6 +8,7 @@
 
 #include "odomcov/closed_form.hpp"
 #include "odomcov/statistics.hpp"
+#include "odomcov/suite.hpp"
 
 namespace odomcov::cli {
 
@@ -50,6 +51,17 @@ void check_alpha(double alpha);
 /// --order must be 1 (first order) or 2 (the order-2 model).
 void check_order(int order);
 void check_threads(int threads);
+
+/// fit and diagnose: a suite whose model gives a log-likelihood that is not finite (no wheel
+/// noise and no measurement noise: a singular predicted covariance) gives the optimiser nothing
+/// to climb. Refused with an InputError naming the suite's robot line (exit 2), never a fit that
+/// prints -inf or "inf" improvements.
+/// compare, fit and diagnose with --order 2: every experiment's order-2 prediction must stay
+/// within kMaxSecondOrderPieces (limits.hpp; its cost is quadratic), else an InputError naming
+/// the experiment (exit 2) before any work.
+void check_second_order_size(const Suite& suite, int order);
+
+void check_finite_start(const Suite& suite, const SuiteModel& model, const std::string& what);
 
 /// CLI11 check for unsigned options (seeds): digits only, so "-1" is refused instead of
 /// wrapping to 2^64 - 1, and the value must fit 64 bits.

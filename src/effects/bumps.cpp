@@ -146,7 +146,7 @@ EffectType bumps_type() {
            "Poisson impulses at rate per metre of mean wheel travel, each N(0, sigma^2) on one "
            "wheel",
            /*systematic=*/false,
-           /*heavy_tails=*/true,
+           /*heavy_tails=*/true, /*grouped=*/false,
            // diagnose fits the rate only (a Gaussian likelihood sees rate sigma^2), completes
            // sigma from the tails, and lets the kurtosis decide against the noise level.
            /*diagnose_fitted=*/{"rate"},

@@ -3,6 +3,7 @@
 // parameters a fit can move, and the candidate list (every registered effect, from its own
 // EffectInfo, plus the robot's wheel noise level). calibration.cpp and diagnosis.cpp hold no
 // effect's name; adding a catalogue effect is its file and its registry line.
+#include <algorithm>
 #include <cmath>
 
 #include "effect.hpp"
@@ -50,6 +51,28 @@ FitCoordinate fit_coordinate(const EffectParameterInfo& p) {
   return c;
 }
 
+CandidateType effect_candidate(const EffectInfo& info) {
+  CandidateType c;
+  c.name = info.name;
+  c.effect = info.name;
+  c.physics = info.physics;
+  c.signature = info.signature;
+  c.systematic = info.systematic;
+  c.heavy_tails = info.heavy_tails;
+  c.confused_with = info.confused_with;
+  c.complete = info.complete;
+  c.on_boundary = true;
+  for (const EffectParameterInfo& p : info.parameters) {
+    const bool fitted = info.diagnose_fitted.empty() ||
+                        std::find(info.diagnose_fitted.begin(), info.diagnose_fitted.end(), p.name) !=
+                            info.diagnose_fitted.end();
+    if (!fitted) continue;
+    c.fitted.push_back(info.name + "." + p.name);
+    c.on_boundary = c.on_boundary && p.neutral == p.lower && !p.open_lower;
+  }
+  return c;
+}
+
 namespace {
 
 /// Wheel noise constants: log coordinates over (1e-9, 1) m^1/2.
@@ -72,27 +95,6 @@ FitCoordinate wheelbase_coordinate(const Robot& robot) {
   c.upper_u = std::log(2.0 * robot.wheelbase_m);
   c.step_u = 0.01;
   c.fd_abs = 1e-4 * robot.wheelbase_m;
-  return c;
-}
-
-CandidateType effect_candidate(const EffectInfo& info) {
-  CandidateType c;
-  c.name = info.name;
-  c.physics = info.physics;
-  c.signature = info.signature;
-  c.systematic = info.systematic;
-  c.heavy_tails = info.heavy_tails;
-  c.confused_with = info.confused_with;
-  c.complete = info.complete;
-  c.on_boundary = true;
-  for (const EffectParameterInfo& p : info.parameters) {
-    const bool fitted = info.diagnose_fitted.empty() ||
-                        std::find(info.diagnose_fitted.begin(), info.diagnose_fitted.end(), p.name) !=
-                            info.diagnose_fitted.end();
-    if (!fitted) continue;
-    c.fitted.push_back(info.name + "." + p.name);
-    c.on_boundary = c.on_boundary && p.neutral == p.lower && !p.open_lower;
-  }
   return c;
 }
 

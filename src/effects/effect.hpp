@@ -238,6 +238,9 @@ const std::vector<EffectType>& registry();
 /// Builds effect objects from specs; throws EffectError (check_effects) for an invalid list.
 std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list);
 
+/// A custom effect's world and model sides (custom.cpp), for a spec that carries its definition.
+std::unique_ptr<Effect> make_custom(const EffectSpec& spec);
+
 /// The registry entry of a name; throws EffectError when unknown.
 const EffectType& type_of(const std::string& name);
 

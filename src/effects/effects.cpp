@@ -14,15 +14,34 @@ const std::vector<EffectInfo>& effect_catalogue() {
   return infos;
 }
 
-const EffectInfo* find_effect(const std::string& name) {
+const EffectSpec* find_spec(const EffectList& list, const std::string& name) {
+  for (const EffectSpec& spec : list) {
+    if (spec.name == name) return &spec;
+  }
+  return nullptr;
+}
+
+EffectSpec* find_spec(EffectList& list, const std::string& name) {
+  return const_cast<EffectSpec*>(find_spec(static_cast<const EffectList&>(list), name));
+}
+
+const EffectInfo* find_effect(const std::string& name, const EffectList& context) {
+  const EffectSpec* spec = find_spec(context, name);
+  if (spec && spec->custom) return &spec->custom->info;
   for (const EffectInfo& info : effect_catalogue()) {
     if (info.name == name) return &info;
   }
   return nullptr;
 }
 
+const EffectInfo* info_of(const EffectSpec& spec) {
+  return spec.custom ? &spec.custom->info : find_effect(spec.name);
+}
+
 std::string check_effect(const EffectSpec& spec) {
-  const EffectInfo* info = find_effect(spec.name);
+  if (spec.custom && spec.custom->name != spec.name) return "custom effect named '" + spec.custom->name + "'";
+  if (spec.custom && find_effect(spec.name)) return "custom effect '" + spec.name + "' has a catalogue effect's name";
+  const EffectInfo* info = info_of(spec);
   if (!info) return "unknown effect '" + spec.name + "'";
   if (spec.values.size() != info->parameters.size()) {
     return spec.name + " takes " + std::to_string(info->parameters.size()) + " parameters";
@@ -42,14 +61,72 @@ std::string check_effect(const EffectSpec& spec) {
   return "";
 }
 
+namespace {
+
+/// A YAML double-quoted scalar.
+std::string yaml_quoted(const std::string& text) {
+  std::string out = "\"";
+  for (char c : text) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+std::string custom_yaml(const EffectSpec& spec) {
+  const CustomEffect& def = *spec.custom;
+  std::string text = "- custom: {name: " + def.name + ", parameters: {";
+  for (std::size_t i = 0; i < def.parameters.size(); ++i) {
+    text += (i ? ", " : "") + def.parameters[i] + ": " + format_number(spec.values[i]);
+  }
+  text += "}";
+  for (const auto& [key, e] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
+                               std::pair{"scale_right", &def.scale_right},
+                               std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+    if (!e->text.empty()) text += std::string(", ") + key + ": " + yaml_quoted(e->text);
+  }
+  return text + "}";
+}
+
+}  // namespace
+
 std::string effect_yaml(const EffectSpec& spec) {
+  if (spec.custom) return custom_yaml(spec);
   const EffectInfo* info = find_effect(spec.name);
   std::string text = "- " + spec.name + ": {";
+  if (!spec.target.empty()) text += "parameter: " + spec.target + (spec.values.empty() ? "" : ", ");
   for (std::size_t i = 0; i < spec.values.size(); ++i) {
     text += (i ? ", " : "") + (info ? info->parameters[i].name : "p" + std::to_string(i)) + ": " +
             format_number(spec.values[i]);
   }
   return text + "}";
+}
+
+std::string check_group_target(const EffectList& list) {
+  for (const EffectSpec& g : list) {
+    if (g.name != kGroupVariation) {
+      if (!g.target.empty()) return g.name + " takes no 'parameter'";
+      continue;
+    }
+    const std::size_t dot = g.target.find('.');
+    if (dot == std::string::npos) {
+      return "parameter must be <effect>.<parameter> of another effect in the list, got '" +
+             g.target + "'";
+    }
+    const std::string effect = g.target.substr(0, dot), param = g.target.substr(dot + 1);
+    const EffectSpec* varied = nullptr;
+    for (const EffectSpec& e : list) varied = e.name == effect && effect != kGroupVariation ? &e : varied;
+    if (!varied) return "parameter '" + g.target + "': no effect " + effect + " in the list";
+    const EffectInfo* info = find_effect(effect);
+    bool known = false;
+    for (const EffectParameterInfo& p : info->parameters) known = known || p.name == param;
+    if (!known) return "parameter '" + g.target + "': " + effect + " has no parameter " + param;
+    if (!info->systematic) {
+      return "parameter '" + g.target + "': " + effect +
+             " only adds randomness; group_variation varies a systematic parameter";
+    }
+  }
+  return "";
 }
 
 void check_effects(const EffectList& list) {
@@ -62,6 +139,9 @@ void check_effects(const EffectList& list) {
     if (const std::string error = check_effect(list[i]); !error.empty()) throw EffectError(key, error);
     for (std::size_t j = 0; j < i; ++j) {
       if (list[j].name == list[i].name) throw EffectError(key, "effect listed twice");
+    }
+    if (list[i].name == kGroupVariation) {
+      if (const std::string error = check_group_target(list); !error.empty()) throw EffectError(key, error);
     }
   }
 }
@@ -119,7 +199,9 @@ const EffectType& type_of(const std::string& name) {
 std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
   check_effects(list);
   std::vector<std::unique_ptr<Effect>> out;
-  for (const EffectSpec& spec : list) out.push_back(type_of(spec.name).make(spec.values));
+  for (const EffectSpec& spec : list) {
+    out.push_back(spec.custom ? make_custom(spec) : type_of(spec.name).make(spec.values));
+  }
   return out;
 }
 

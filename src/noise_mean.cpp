@@ -1,0 +1,102 @@
+// The mean of the pose error induced by wheel noise alone (propagation.hpp, noise_induced_mean):
+// E[exp(i Theta)] = exp(-V/2) for the Gaussian heading, integrated along each piece.
+#include "noise_mean.hpp"
+
+#include <cmath>
+#include <complex>
+#include <cstdint>
+#include <limits>
+
+#include "odomcov/limits.hpp"
+#include "odomcov/propagation.hpp"
+#include "quadrature.hpp"
+#include "series.hpp"
+
+namespace odomcov {
+namespace detail {
+namespace {
+
+using Complex = std::complex<double>;
+
+/// Pieces with |a| and |delta| below this take the power series (per-sample pieces of logged
+/// runs are all in this range).
+constexpr double kSmallPieceMax = 0.05;
+
+/// int_0^1 exp(i a u) expm1(delta u) du: a power series for small pieces, else Gauss-Legendre
+/// with 16 points per panel, one panel per radian of a (expm1 keeps it accurate for tiny delta).
+Complex damped_minus_undamped(double a, double delta) {
+  static const auto nodes = gauss_legendre_01<16>();
+  if (std::abs(a) <= kSmallPieceMax && std::abs(delta) <= kSmallPieceMax) {
+    // No transcendental call: with E(z) = int_0^1 e^{z u} du = sum_k z^k/(k+1)!, the integral
+    // is E(z1) - E(z2) for z1 = delta + i a, z2 = i a, and z1^k - z2^k = delta D_k with
+    // D_k = z1 D_{k-1} + z2^{k-1} (D_1 = 1), so nothing cancels. |z| <= 0.071: the first term
+    // left out (k = 13) is below 1e-25 relative.
+    const Complex z1(delta, a), z2(0.0, a);
+    Complex d = 1.0, z2_pow = 1.0, sum = 0.5;  // k = 1: D_1/2!
+    double factorial = 2.0;
+    for (int k = 2; k <= 12; ++k) {
+      z2_pow *= z2;
+      d = z1 * d + z2_pow;
+      factorial *= k + 1;
+      sum += d / factorial;
+    }
+    return delta * sum;
+  }
+  // A turn beyond the input limit (limits.hpp) would need more panels than is sensible: NaN,
+  // which the verdicts report as untestable, rather than a hang or an overflowing count.
+  if (!(std::abs(a) <= kMaxTurn_rad) || !std::isfinite(delta)) {
+    return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  }
+  const auto panels = 1 + static_cast<std::int64_t>(std::abs(a));
+  const double n = static_cast<double>(panels);
+  Complex sum = 0.0;
+  for (std::int64_t p = 0; p < panels; ++p) {
+    for (const auto& [x, w] : nodes) {
+      const double u = (static_cast<double>(p) + x) / n;
+      sum += (w / n) * std::polar(1.0, a * u) * std::expm1(delta * u);
+    }
+  }
+  return sum;
+}
+
+}  // namespace
+
+/// One piece's share of the noise-induced mean, in the world frame: with heading theta0 + a u,
+/// heading variance V0 + dV u and noise intensity n along the piece,
+///   e^{i theta0} [ int_0^1 e^{i a u} e^{-(V0 + dV u)/2} du (d + i n_td/2) - int_0^1 e^{i a u} du d ]
+/// written as e^{-V0/2} D drive - U d = expm1(-V0/2) D drive + (D - U) drive + U (i n_td/2),
+/// so nothing cancels when the variances are small. `rotation` is e^{i theta0}.
+Complex noise_mean_of_piece(Complex rotation, double d, double a, double v0, double dv,
+                            double n_td) {
+  // U = int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2)
+  const double sinc_half = series::sinc(0.5 * a);
+  const Complex undamped(series::sinc(a), 0.5 * a * sinc_half * sinc_half);
+  const Complex extra = damped_minus_undamped(a, -0.5 * dv);  // D - U
+  const Complex damped = undamped + extra;
+  const Complex drive(d, 0.5 * n_td);
+  return rotation * (std::expm1(-0.5 * v0) * damped * drive + extra * drive +
+                     undamped * Complex(0.0, 0.5 * n_td));
+}
+
+}  // namespace detail
+
+using Complex = std::complex<double>;
+
+Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
+  const double B = robot.wheelbase_m;
+  double heading = 0.0;
+  double variance = 0.0;  // accumulated heading variance at the segment start
+  Complex mean = 0.0;
+  for (std::size_t i = 0; i < path.interval_count(); ++i) {
+    const ArcSegment seg = path.interval(i);
+    const double a = seg.heading_change_rad(B);
+    const Matrix2 n = wheel_noise_intensity(seg, B, robot.noise);
+    mean += detail::noise_mean_of_piece(std::polar(1.0, heading), seg.center_m(), a, variance,
+                                        n(0, 0), n(0, 1));
+    heading += a;
+    variance += n(0, 0);
+  }
+  return {mean.real(), mean.imag(), 0.0};
+}
+
+}  // namespace odomcov
