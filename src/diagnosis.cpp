@@ -37,52 +37,18 @@ std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<Run
   return out;
 }
 
-/// A group_variation candidate's varied parameter: "wheelbase_error.Eb" of
-/// "group_variation(wheelbase_error.Eb)"; "" for any other candidate.
-std::string group_candidate_target(const std::string& candidate) {
-  const std::string prefix = std::string(kGroupVariation) + "(";
-  if (candidate.rfind(prefix, 0) != 0 || candidate.back() != ')') return "";
-  return candidate.substr(prefix.size(), candidate.size() - prefix.size() - 1);
-}
-
-/// The catalogue effect of a candidate: its name, or group_variation for group_variation(...).
-std::string candidate_effect(const std::string& candidate) {
-  return group_candidate_target(candidate).empty() ? candidate : kGroupVariation;
-}
-
-/// Systematic candidates move the mean and are judged on the full likelihood; the others only
-/// add randomness and are judged on the scatter part, which a mean misfit cannot inflate.
-bool systematic(const std::string& effect, const EffectList& context) {
-  return effect != kWheelNoiseLevel && find_effect(candidate_effect(effect), context)->systematic;
-}
-
-/// The parameters a candidate fits. bumps: only the rate; a Gaussian likelihood sees rate and
-/// sigma only through rate sigma^2, so sigma stays at its typical size there (see bumps_sigma).
-/// group_variation(E.p): its sd, and E.p too when E is not in the model yet (it joins at its
-/// neutral value).
-std::vector<std::string> fitted_names(const std::string& effect, const EffectList& context) {
-  if (effect == kWheelNoiseLevel) return {"k_left", "k_right"};
-  if (const std::string target = group_candidate_target(effect); !target.empty()) {
-    std::vector<std::string> names;
-    if (!find_spec(context, target.substr(0, target.find('.')))) names.push_back(target);
-    names.push_back(std::string(kGroupVariation) + ".sd");
-    return names;
-  }
-  if (effect == "bumps") return {"bumps.rate"};
-  std::vector<std::string> names;
-  for (const EffectParameterInfo& p : find_effect(effect, context)->parameters) names.push_back(effect + "." + p.name);
-  return names;
-}
-
-/// The fitted parameters of a model's effects, split into systematic and random ones.
+/// The fitted parameters of a model's effects (catalogue or custom, from their EffectInfo),
+/// split into systematic ones (moving the mean, fitted on the full likelihood) and random ones
+/// (fitted on the scatter part, which a mean misfit cannot inflate).
 struct FittedNames {
   std::vector<std::string> systematic, random;
 };
 FittedNames split_fitted_names(const EffectList& effects) {
   FittedNames out;
   for (const EffectSpec& e : effects) {
-    for (const std::string& n : fitted_names(e.name, effects)) {
-      (systematic(e.name, effects) ? out.systematic : out.random).push_back(n);
+    const EffectInfo& info = *info_of(e);
+    for (const std::string& n : effect_candidate(info).fitted) {
+      (info.systematic ? out.systematic : out.random).push_back(n);
     }
   }
   return out;
@@ -92,36 +58,115 @@ FittedNames split_fitted_names(const EffectList& effects) {
 /// coordinate step: the systematic effects on the full likelihood (random ones held), then the
 /// random effects on the scatter part (systematic ones held). A random effect is thus never
 /// sized by a mean misfit, and a systematic one always sees the spread the random ones give.
-SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* progress) {
+SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* progress,
+                 FitPath path, ResidualCache& cache) {
   const FittedNames names = split_fitted_names(model.effects);
   SuiteModel out = model;
   std::atomic<std::int64_t>* counter = progress ? &progress->evaluations : nullptr;
-  if (!names.systematic.empty()) out = fit(suite, out, names.systematic, Likelihood::full, counter).model;
-  if (!names.random.empty()) out = fit(suite, out, names.random, Likelihood::scatter, counter).model;
+  if (!names.systematic.empty()) {
+    out = fit(suite, out, names.systematic, Likelihood::full, counter, path, &cache).model;
+  }
+  if (!names.random.empty()) {
+    out = fit(suite, out, names.random, Likelihood::scatter, counter, path, &cache).model;
+  }
   if (progress) ++progress->fits_done;
   return out;
 }
 
-/// True when every fitted parameter's "no effect" value is the edge of its range (a size that
-/// cannot be negative): the likelihood-ratio statistic is then a 50:50 mixture of chi^2_0 and
-/// chi^2_dof [Self87], so the p-value is half the chi^2 one.
-bool on_boundary(const std::string& effect, const std::vector<std::string>& own,
-                 const EffectList& context) {
-  if (effect == kWheelNoiseLevel) return false;
-  for (const std::string& name : own) {
-    const std::size_t dot = name.find('.');
-    for (const EffectParameterInfo& p : find_effect(name.substr(0, dot), context)->parameters) {
-      if (p.name == name.substr(dot + 1) && !(p.neutral == p.lower && !p.open_lower)) return false;
+/// The value of a fitted parameter in a model: a robot parameter ("k_left") or an effect's
+/// ("wheelbase_error.Eb"); NaN when the model lacks it.
+double fitted_value(SuiteModel& model, const std::string& name) {
+  const std::size_t dot = name.find('.');
+  if (dot == std::string::npos) {
+    for (const RobotParameter& p : robot_parameters()) {
+      if (p.name == name) return p.ref(model.robot);
     }
+    return kNaN;
   }
-  return true;
+  const EffectSpec* spec = find_spec(model.effects, name.substr(0, dot));
+  if (!spec) return kNaN;
+  const auto& ps = info_of(*spec)->parameters;
+  for (std::size_t i = 0; i < ps.size() && i < spec->values.size(); ++i) {
+    if (ps[i].name == name.substr(dot + 1)) return spec->values[i];
+  }
+  return kNaN;
 }
 
-/// The group_variation candidates: one per systematic parameter of the model's effects, and
-/// wheelbase_error.Eb and wheel_diameter_ratio.Ed (the sizes a day's tyre pressure or load
-/// change) when the model does not have them. Only for suites that give groups, and when the
-/// model has no group_variation yet.
-std::vector<std::string> group_candidates(const Suite& suite, const EffectList& model) {
+/// True when a candidate is reported by its fitted names (a robot candidate, or a group
+/// candidate whose fit spans the varied effect and group_variation), not by its effect's spec.
+bool reported_by_names(const CandidateType& type) { return type.robot || type.effect != type.name; }
+
+/// The candidate's reported parameters, values and standard errors from its fit: a robot or
+/// group candidate's fitted parameters (named within the candidate's effect: "sd" beside
+/// "wheelbase_error.Eb"); an effect's every parameter (NaN standard error where not fitted),
+/// completed by the effect's own hook (EffectInfo::complete).
+void describe_fit(const Suite& suite, const CandidateType& type, Eigen::Index offset,
+                  const Eigen::VectorXd& se, Candidate& c) {
+  if (reported_by_names(type)) {
+    const std::string prefix = type.effect + ".";
+    for (std::size_t i = 0; i < type.fitted.size(); ++i) {
+      const std::string& n = type.fitted[i];
+      const bool within = !type.effect.empty() && n.rfind(prefix, 0) == 0;
+      c.parameters.push_back(within ? n.substr(prefix.size()) : n);
+      c.values.push_back(fitted_value(c.model, n));
+      c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
+    }
+    return;
+  }
+  EffectSpec* spec = find_spec(c.model.effects, type.effect);
+  const EffectInfo& info = *info_of(*spec);
+  std::vector<double> stderrs(info.parameters.size(), kNaN);
+  for (std::size_t p = 0; p < info.parameters.size(); ++p) {
+    c.parameters.push_back(info.parameters[p].name);
+    for (std::size_t i = 0; i < type.fitted.size(); ++i) {
+      if (type.fitted[i] == type.effect + "." + info.parameters[p].name) {
+        stderrs[p] = se(offset + static_cast<Eigen::Index>(i));
+      }
+    }
+  }
+  if (type.complete) c.note = type.complete(suite, c.model.robot.wheelbase_m, *spec, stderrs);
+  c.values = spec->values;
+  c.stderrs = stderrs;
+}
+
+/// True when a parameter's "no effect" value is the closed lower edge of its range.
+bool neutral_at_edge(const EffectParameterInfo& p) { return p.neutral == p.lower && !p.open_lower; }
+
+/// The group_variation candidate varying `target` ("wheelbase_error.Eb"): it fits the varied
+/// parameter too when its effect is not in the model yet (joining at its neutral value), and
+/// group_variation's sd from its typical size; it reads as group_variation's physics and
+/// signature. On the boundary when every fitted size is (sd, and the new parameter's).
+CandidateType group_candidate(const std::string& target, const EffectList& model) {
+  const EffectInfo& group = *find_effect(kGroupVariation);
+  const std::string effect = target.substr(0, target.find('.'));
+  CandidateType c;
+  c.name = std::string(kGroupVariation) + "(" + target + ")";
+  c.effect = kGroupVariation;
+  c.physics = group.physics + ", varying " + target;
+  c.signature = group.signature;
+  c.systematic = group.systematic;
+  c.heavy_tails = group.heavy_tails;
+  c.on_boundary = true;
+  if (!find_spec(model, effect)) {
+    const EffectInfo& varied = *find_effect(effect);
+    EffectSpec spec{effect, {}};
+    for (const EffectParameterInfo& p : varied.parameters) {
+      spec.values.push_back(p.neutral);
+      if (effect + "." + p.name == target) c.on_boundary = neutral_at_edge(p);
+    }
+    c.start.push_back(spec);
+    c.fitted.push_back(target);
+  }
+  c.start.push_back({kGroupVariation, {group.parameters[0].typical}, target});
+  c.fitted.push_back(std::string(kGroupVariation) + "." + group.parameters[0].name);
+  c.on_boundary = c.on_boundary && neutral_at_edge(group.parameters[0]);
+  return c;
+}
+
+/// The group_variation candidates: one per systematic parameter of the model's effects, and one
+/// per catalogue parameter that varies between groups (EffectParameterInfo) when the model
+/// lacks it. Only for suites that give groups, and when the model has no group_variation yet.
+std::vector<CandidateType> group_candidates(const Suite& suite, const EffectList& model) {
   bool grouped = false;
   for (const SuiteExperiment& ex : suite.experiments) grouped = grouped || !ex.group.empty();
   if (!grouped || find_spec(model, kGroupVariation)) return {};
@@ -131,100 +176,82 @@ std::vector<std::string> group_candidates(const Suite& suite, const EffectList& 
     if (!info->systematic || info->grouped) continue;
     for (const EffectParameterInfo& p : info->parameters) targets.push_back(e.name + "." + p.name);
   }
-  for (const char* t : {"wheelbase_error.Eb", "wheel_diameter_ratio.Ed"}) {
-    if (std::find(targets.begin(), targets.end(), t) == targets.end()) targets.push_back(t);
+  for (const EffectInfo& info : effect_catalogue()) {
+    for (const EffectParameterInfo& p : info.parameters) {
+      const std::string t = info.name + "." + p.name;
+      const bool listed = std::find(targets.begin(), targets.end(), t) != targets.end();
+      if (p.varies_between_groups && !listed) targets.push_back(t);
+    }
   }
-  std::vector<std::string> out;
-  for (const std::string& t : targets) out.push_back(std::string(kGroupVariation) + "(" + t + ")");
+  std::vector<CandidateType> out;
+  for (const std::string& t : targets) out.push_back(group_candidate(t, model));
   return out;
 }
 
-/// A candidate's values in its (refitted) model, in the order of its parameters: the effect's
-/// values (bumps: sigma stays, rate refitted), or a group candidate's fitted names.
-std::vector<double> refitted_values(const Candidate& c, const EffectList& model) {
-  std::vector<double> values;
-  if (group_candidate_target(c.effect).empty()) {
-    for (const EffectSpec& e : c.model.effects) values = e.name == c.effect ? e.values : values;
-    return values;
+/// The round's candidates: the catalogue's effects not in the model (grouped ones only as group
+/// candidates), the group candidates, the robot candidates; only those `only` names (by their
+/// name or their effect's) when given; then the user's own candidates, each from its given
+/// values (a given catalogue candidate starts there too).
+std::vector<CandidateType> round_candidates(const Suite& suite, const EffectList& model,
+                                            const std::vector<std::string>& only,
+                                            const EffectList& given) {
+  std::vector<CandidateType> types;
+  for (const CandidateType& t : candidate_types()) {
+    if (!t.robot && !find_spec(model, t.name) && !find_effect(t.name)->grouped) types.push_back(t);
   }
-  for (const std::string& n : fitted_names(c.effect, model)) {
-    const std::size_t dot = n.find('.');
-    for (const EffectSpec& e : c.model.effects) {
-      const auto& ps = info_of(e)->parameters;
-      for (std::size_t i = 0; e.name == n.substr(0, dot) && i < ps.size(); ++i) {
-        if (ps[i].name == n.substr(dot + 1)) values.push_back(e.values[i]);
-      }
+  for (CandidateType& t : group_candidates(suite, model)) types.push_back(std::move(t));
+  for (const CandidateType& t : candidate_types()) {
+    if (t.robot) types.push_back(t);
+  }
+  if (!only.empty()) {
+    std::vector<CandidateType> kept;
+    for (CandidateType& t : types) {
+      const bool named = std::find(only.begin(), only.end(), t.name) != only.end() ||
+                         std::find(only.begin(), only.end(), t.effect) != only.end();
+      if (named) kept.push_back(std::move(t));
+    }
+    types = std::move(kept);
+  }
+  for (const EffectSpec& c : given) {
+    if (c.values.empty() || find_spec(model, c.name)) continue;  // nothing to fit / in the model
+    auto listed = std::find_if(types.begin(), types.end(),
+                               [&](const CandidateType& t) { return t.name == c.name; });
+    if (listed == types.end()) listed = types.insert(types.end(), effect_candidate(*info_of(c)));
+    listed->start = {c};
+  }
+  return types;
+}
+
+/// The signature rule for the pairs a Gaussian likelihood cannot separate
+/// (EffectInfo::confused_with): when both are significant, the one the tails speak against
+/// moves to just below the other (the rest of the order stands).
+void apply_tail_rule(std::vector<Candidate>& candidates, const std::vector<CandidateType>& types,
+                     bool heavy_tails) {
+  auto at = [&](const std::string& n) {
+    return std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) { return c.effect == n; });
+  };
+  for (const CandidateType& type : types) {
+    if (type.confused_with.empty()) continue;
+    auto self = at(type.name), other = at(type.confused_with);
+    if (self == candidates.end() || other == candidates.end() || !self->significant || !other->significant) continue;
+    auto heavy = type.heavy_tails ? self : other, gaussian = type.heavy_tails ? other : self;
+    const bool heavy_first = heavy < gaussian;
+    if (heavy_tails != heavy_first) {
+      auto loser = heavy_tails ? gaussian : heavy;
+      auto winner = heavy_tails ? heavy : gaussian;
+      std::rotate(loser, loser + 1, winner + 1);  // loser now sits right after the winner
     }
   }
-  return values;
-}
-
-/// The model a group_variation candidate starts from: the varied effect (at its neutral value,
-/// when new) and group_variation at its typical sd.
-SuiteModel with_group_candidate(const SuiteModel& base, const std::string& candidate) {
-  SuiteModel m = base;
-  const std::string target = group_candidate_target(candidate);
-  const std::string effect = target.substr(0, target.find('.'));
-  if (!find_spec(m.effects, effect)) {
-    EffectSpec spec{effect, {}};
-    for (const EffectParameterInfo& p : find_effect(effect)->parameters) spec.values.push_back(p.neutral);
-    m.effects.push_back(spec);
-  }
-  m.effects.push_back({kGroupVariation, {find_effect(kGroupVariation)->parameters[0].typical}, target});
-  return m;
-}
-
-/// Sample excess kurtosis, bias-corrected (G2 of Joanes & Gill 1998).
-double excess_kurtosis(const std::vector<double>& x) {
-  const double n = static_cast<double>(x.size());
-  double mean = 0;
-  for (double v : x) mean += v / n;
-  double m2 = 0, m4 = 0;
-  for (double v : x) {
-    const double d = v - mean;
-    m2 += d * d / n;
-    m4 += d * d * d * d / n;
-  }
-  const double g2 = m4 / (m2 * m2) - 3.0;
-  return ((n + 1) * g2 + 6) * (n - 1) / ((n - 2) * (n - 3));
-}
-
-/// bumps' sigma by the method of moments on the straight-line experiments: along a line a bump
-/// J on one wheel moves the along-track error by J/2, so with Lambda = rate d bumps per run the
-/// fourth cumulant of the along-track error is 3 Lambda sigma^4/16 = (3/16) rate sigma^4 d,
-/// while q = rate sigma^2 is what the likelihood fitted. Pooling the lines (each cumulant from
-/// its sample excess kurtosis times its variance squared, weighted by travel) gives
-/// rate sigma^4 = (16/3) sum kappa4 / sum d and sigma^2 = rate sigma^4 / q. Returns NaN when no
-/// straight experiment of ten runs or more shows heavy tails.
-double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
-  double cumulant = 0.0, travel = 0.0;
-  for (const SuiteExperiment& ex : suite.experiments) {
-    if (ex.logged || ex.runs.size() < 10) continue;
-    double d = 0;
-    bool straight = true;
-    for (std::size_t i = 0; i < ex.path.interval_count(); ++i) {
-      const ArcSegment s = ex.path.interval(i);
-      straight = straight && s.left_m == s.right_m;
-      d += std::abs(s.center_m());
-    }
-    if (!straight || d <= 0) continue;
-    std::vector<double> along;
-    for (const SuiteRun& r : ex.runs) along.push_back(run_error(ex, r, wheelbase_m).x());
-    double mean = 0, var = 0;
-    for (double v : along) mean += v / static_cast<double>(along.size());
-    for (double v : along) var += (v - mean) * (v - mean) / static_cast<double>(along.size() - 1);
-    cumulant += excess_kurtosis(along) * var * var;
-    travel += d;
-  }
-  if (!(travel > 0 && cumulant > 0 && q > 0)) return kNaN;
-  return std::sqrt(16.0 / 3.0 * cumulant / travel / q);
 }
 
 }  // namespace
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
                    const std::vector<std::string>& only, DiagnoseProgress* progress,
-                   const EffectList& candidates) {
+                   const EffectList& candidates, FitPath path) {
+  // Every exact propagation of the round, kept: the fast path's anchors and difference points
+  // around the base model are shared by all candidates.
+  ResidualCache cache(suite);
   Diagnosis d;
   d.alpha = alpha;
   d.runs = run_count(suite);
@@ -237,51 +264,32 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   // candidate refits the model's effects of its own kind with it (systematic ones on the full
   // likelihood, random ones on the scatter part); the others stay at their refitted values.
   const FittedNames nuisance = split_fitted_names(model.effects);
-  const SuiteModel base = refit(suite, model, progress);
-  const auto base_residuals = residuals(suite, base);
+  const SuiteModel base = refit(suite, model, progress, path, cache);
+  const auto& base_residuals = cache.at(base);
   const double base_full = log_likelihood(base_residuals);
   const double base_scatter = scatter_log_likelihood(base_residuals);
   const std::vector<double> base_by_experiment = experiment_log_likelihoods(base_residuals);
 
-  std::vector<std::string> names;
-  for (const EffectInfo& info : effect_catalogue()) {
-    if (!find_spec(model.effects, info.name) && !info.grouped) names.push_back(info.name);
-  }
-  for (const std::string& g : group_candidates(suite, model.effects)) names.push_back(g);
-  names.push_back(kWheelNoiseLevel);
-  if (!only.empty()) {
-    std::vector<std::string> kept;
-    for (const std::string& n : names) {
-      const bool named = std::find(only.begin(), only.end(), n) != only.end() ||
-                         std::find(only.begin(), only.end(), candidate_effect(n)) != only.end();
-      if (named) kept.push_back(n);
-    }
-    names = kept;
-  }
-  // The user's own candidates (custom, or catalogue ones with their starting values) join the
-  // list; each enters the fit from its given start.
-  for (const EffectSpec& c : candidates) {
-    if (c.values.empty()) continue;  // nothing to fit (the CLI refuses such a candidate)
-    if (!find_spec(model.effects, c.name) && std::find(names.begin(), names.end(), c.name) == names.end()) {
-      names.push_back(c.name);
-    }
-  }
+  const std::vector<CandidateType> types = round_candidates(suite, model.effects, only, candidates);
 
   // The fits: the base refit, one per candidate and the winner's refit.
-  if (progress) progress->fits_total = static_cast<std::int64_t>(names.size()) + 2;
+  if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
   const double log_runs = std::log(static_cast<double>(d.runs));
-  for (const std::string& name : names) {
+  for (const CandidateType& type : types) {
     Candidate c;
-    c.effect = name;
-    SuiteModel start = base;
-    if (const EffectSpec* given = find_spec(candidates, name)) start.effects.push_back(*given);
-    c.systematic = systematic(name, start.effects);
+    c.effect = type.name;
+    c.physics = type.physics;
+    c.signature = type.signature;
+    c.robot = type.robot;
+    c.systematic = type.systematic;
     std::vector<std::string> fitted = c.systematic ? nuisance.systematic : nuisance.random;
-    const std::vector<std::string> own = fitted_names(name, start.effects);
+    const std::vector<std::string>& own = type.fitted;
     fitted.insert(fitted.end(), own.begin(), own.end());
     const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
-    if (!group_candidate_target(name).empty()) start = with_group_candidate(base, name);
-    const FitResult f = fit(suite, start, fitted, kind, progress ? &progress->evaluations : nullptr);
+    SuiteModel start = base;
+    start.effects.insert(start.effects.end(), type.start.begin(), type.start.end());
+    const FitResult f =
+        fit(suite, start, fitted, kind, progress ? &progress->evaluations : nullptr, path, &cache);
     // With heavy tails the observed information understates the uncertainty: sandwich SEs.
     const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
     c.model = f.model;
@@ -298,41 +306,9 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
       lr /= before.mardia_b2 / before.mardia_expected;
     }
     lr = std::max(0.0, lr);
-    c.p_value = lr == 0.0 ? 1.0 : (on_boundary(name, own, start.effects) ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
-    const auto offset = static_cast<Eigen::Index>(fitted.size() - own.size());
-    if (name == kWheelNoiseLevel) {
-      c.parameters = {"k_left", "k_right"};
-      c.values = {f.values(offset), f.values(offset + 1)};
-      c.stderrs = {se(offset), se(offset + 1)};
-    } else if (name == "bumps") {
-      // q = rate sigma^2 is what the likelihood fitted; sigma comes from the tails.
-      EffectSpec* spec = find_spec(c.model.effects, "bumps");
-      const double sigma_fixed = spec->values[1];
-      const double q = f.values(offset) * sigma_fixed * sigma_fixed;
-      const double q_se = se(offset) * sigma_fixed * sigma_fixed;
-      const double sigma = bumps_sigma(suite, c.model.robot.wheelbase_m, q);
-      const double s = std::isfinite(sigma) ? sigma : sigma_fixed;
-      spec->values = {q / (s * s), s};
-      c.parameters = {"rate", "sigma"};
-      c.values = spec->values;
-      c.stderrs = {q_se / (s * s), kNaN};
-      c.note = "rate sigma^2 = " + format_number(q, "%.3g") + " +/- " + format_number(q_se, "%.1g") +
-               " m (what the means and covariances determine); " +
-               (std::isfinite(sigma) ? "sigma from the excess kurtosis of the along-track errors on "
-                                       "the straight lines (a moment estimate, no standard error)"
-                                     : "sigma undetermined (no straight line with heavy tails), "
-                                       "kept at " + format_number(s, "%.3g") + " m");
-    } else {
-      // Named within the effect ("Eb"); a group candidate's new varied parameter keeps its
-      // effect ("wheelbase_error.Eb" beside "sd").
-      const std::string prefix = candidate_effect(name) + ".";
-      for (std::size_t i = 0; i < own.size(); ++i) {
-        c.parameters.push_back(own[i].rfind(prefix, 0) == 0 ? own[i].substr(prefix.size()) : own[i]);
-        c.values.push_back(f.values(offset + static_cast<Eigen::Index>(i)));
-        c.stderrs.push_back(se(offset + static_cast<Eigen::Index>(i)));
-      }
-    }
-    const auto candidate_residuals = residuals(suite, c.model);
+    c.p_value = lr == 0.0 ? 1.0 : (type.on_boundary ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
+    describe_fit(suite, type, static_cast<Eigen::Index>(fitted.size() - own.size()), se, c);
+    const auto& candidate_residuals = cache.at(c.model);
     c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - base_full;
     const std::vector<double> by_experiment = experiment_log_likelihoods(candidate_residuals);
     std::vector<std::pair<std::string, double>> gains;
@@ -353,32 +329,28 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   std::stable_sort(d.candidates.begin(), d.candidates.end(), [&](const Candidate& a, const Candidate& b) {
     return a.significant != b.significant ? a.significant : a.delta_bic < b.delta_bic;
   });
-  // The signature rule for the pair a Gaussian likelihood cannot separate: the one the tails
-  // speak against moves to just below the other (the rest of the order stands).
-  auto at = [&](const std::string& n) {
-    return std::find_if(d.candidates.begin(), d.candidates.end(),
-                        [&](const Candidate& c) { return c.effect == n; });
-  };
-  auto bumps = at("bumps"), level = at(kWheelNoiseLevel);
-  if (bumps != d.candidates.end() && level != d.candidates.end() && bumps->significant &&
-      level->significant) {
-    const bool bumps_first = bumps < level;
-    if (d.heavy_tails != bumps_first) {
-      auto loser = d.heavy_tails ? level : bumps;
-      auto winner = d.heavy_tails ? bumps : level;
-      std::rotate(loser, loser + 1, winner + 1);  // loser now sits right after the winner
-    }
-  }
+  apply_tail_rule(d.candidates, types, d.heavy_tails);
   if (!d.candidates.empty() && d.candidates.front().significant) {
     d.best = 0;
     // The model to adopt: everything refitted by its part of the likelihood, now that the new
     // effect is in (the earlier effects were sized without it).
     Candidate& best = d.candidates.front();
-    best.model = refit(suite, best.model, progress);
-    if (best.effect == kWheelNoiseLevel) {
-      best.values = {best.model.robot.noise.k_left, best.model.robot.noise.k_right};
+    // (When every effect is of the candidate's kind and nothing was completed after its fit,
+    // the candidate's own fit was already that refit: all of them jointly on its likelihood.)
+    const CandidateType& type = *std::find_if(
+        types.begin(), types.end(), [&](const CandidateType& t) { return t.name == best.effect; });
+    bool other_kind = type.complete != nullptr;
+    for (const EffectSpec& e : best.model.effects) {
+      other_kind = other_kind || info_of(e)->systematic != best.systematic;
+    }
+    if (other_kind) best.model = refit(suite, best.model, progress, path, cache);
+    if (reported_by_names(type)) {
+      for (std::size_t i = 0; i < type.fitted.size(); ++i) {
+        best.values[i] = fitted_value(best.model, type.fitted[i]);
+      }
     } else {
-      best.values = refitted_values(best, model.effects);
+      // completed ones stay, fitted ones refitted
+      best.values = find_spec(best.model.effects, type.effect)->values;
     }
   }
   if (progress) progress->fits_done = progress->fits_total.load();
@@ -387,23 +359,14 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
   if (!d.explained) {
     const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
-    d.residuals = residual_alignment(suite, final_model, residuals(suite, final_model));
+    d.residuals = residual_alignment(suite, final_model, cache.at(final_model));
   }
   return d;
 }
 
 std::string explain(const Candidate& c) {
-  std::string text;
-  std::string signature;
-  if (c.effect == kWheelNoiseLevel) {
-    text = "wheel noise at another level than the model's: ";
-    signature = "variance off in every experiment, growing with distance as wheel noise does";
-  } else {
-    const EffectInfo* info = find_effect(candidate_effect(c.effect), c.model.effects);
-    const std::string target = group_candidate_target(c.effect);
-    text = info->physics + (target.empty() ? "" : ", varying " + target) + ": ";
-    signature = info->signature;
-  }
+  std::string text = c.physics + ": ";
+  const std::string& signature = c.signature;
   for (std::size_t i = 0; i < c.parameters.size(); ++i) {
     text += (i ? ", " : "") + c.parameters[i] + " = " + format_number(c.values[i], "%.6g");
     if (std::isfinite(c.stderrs[i])) text += " +/- " + format_number(c.stderrs[i], "%.1g");
@@ -452,25 +415,23 @@ std::string verdict_text(const Diagnosis& d) {
 }
 
 std::string candidate_yaml(const Candidate& c, const SuiteModel& model) {
-  if (c.effect == kWheelNoiseLevel) {
+  if (c.robot) {
     Robot robot = model.robot;
-    robot.noise.k_left = c.values[0];
-    robot.noise.k_right = c.values[1];
+    for (std::size_t i = 0; i < c.parameters.size(); ++i) {
+      for (const RobotParameter& p : robot_parameters()) {
+        if (p.name == c.parameters[i]) p.ref(robot) = c.values[i];
+      }
+    }
     return robot_yaml(robot);
   }
-  // A group candidate: group_variation, after the effect it varies when that is new (so the
-  // lines pasted under model.effects never repeat an effect the suite has).
+  // The effects the candidate adds, in its model's order: a group candidate's varied effect
+  // (when new) before group_variation, so the lines pasted under model.effects never repeat an
+  // effect the suite has.
   std::string text;
-  const std::string target = group_candidate_target(c.effect);
   for (const EffectSpec& e : c.model.effects) {
-    const bool varied_and_new = !target.empty() && e.name == target.substr(0, target.find('.')) &&
-                                !find_spec(model.effects, e.name);
-    if (varied_and_new) text += effect_yaml(e) + "\n";
+    if (!find_spec(model.effects, e.name)) text += (text.empty() ? "" : "\n") + effect_yaml(e);
   }
-  for (const EffectSpec& e : c.model.effects) {
-    if (e.name == candidate_effect(c.effect)) return text + effect_yaml(e);
-  }
-  return "";
+  return text;
 }
 
 }  // namespace odomcov

@@ -62,24 +62,28 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
   const GroupTarget target = group_target(model.effects);
   std::map<std::string, int> groups;
   std::vector<std::vector<RunResidual>> out(suite.experiments.size());
+  // Every unit of work: a planned-path experiment (one prediction serves all its runs) or one
+  // logged run. They run in parallel over the whole suite (most logged experiments are single
+  // runs, so a loop per experiment would leave cores idle).
+  // Group indices are assigned serially first (in experiment order), so they do not depend on
+  // the thread schedule.
+  std::vector<std::pair<std::size_t, std::size_t>> work;
+  std::vector<int> group_of(suite.experiments.size());
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     const SuiteExperiment& ex = suite.experiments[e];
-    const int group = groups.emplace(group_key(ex), static_cast<int>(groups.size())).first->second;
+    group_of[e] = groups.emplace(group_key(ex), static_cast<int>(groups.size())).first->second;
     out[e].resize(ex.runs.size());
     if (!ex.logged) {
-      std::vector<double> durations;
-      const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
-      const Prediction p =
-          predict_with_order(pieces, durations, model.robot, model.effects, model.order);
-      const Vector3 column = group_column(pieces, durations, model.robot, model.effects, target);
-      const Vector3 odometry = sampled_end_pose(ex.path, B);
-      for (std::size_t r = 0; r < ex.runs.size(); ++r) {
-        out[e][r] = {pose_error(ex.runs[r].measured, odometry), p.mean + p.noise_mean,
-                     p.cov + meas, column, group};
-      }
+      work.emplace_back(e, 0);
       continue;
     }
-    tbb::parallel_for(std::size_t{0}, ex.runs.size(), [&](std::size_t r) {
+    for (std::size_t r = 0; r < ex.runs.size(); ++r) work.emplace_back(e, r);
+  }
+  tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
+    const auto [e, r] = work[w];
+    const SuiteExperiment& ex = suite.experiments[e];
+    const int group = group_of[e];
+    if (ex.logged) {
       const SuiteRun& run = ex.runs[r];
       const Prediction p =
           predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
@@ -87,8 +91,18 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
                    p.cov + meas,
                    group_column(run.pieces, run.durations_s, model.robot, model.effects, target),
                    group};
-    });
-  }
+      return;
+    }
+    std::vector<double> durations;
+    const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
+    const Prediction p = predict_with_order(pieces, durations, model.robot, model.effects, model.order);
+    const Vector3 column = group_column(pieces, durations, model.robot, model.effects, target);
+    const Vector3 odometry = sampled_end_pose(ex.path, B);
+    for (std::size_t i = 0; i < ex.runs.size(); ++i) {
+      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean, p.cov + meas,
+                   column, group};
+    }
+  }, tbb::simple_partitioner());
   return out;
 }
 

@@ -18,20 +18,29 @@ namespace {
 
 using Complex = std::complex<double>;
 
-/// Pieces with |a| and |delta| below this take the 4-point rule: the integrand is entire and its
-/// 8th derivative is below |delta| (|a| + |delta|)^7, so the rule's error is below 1e-16
-/// relative there (per-sample pieces of logged runs are all in this range).
+/// Pieces with |a| and |delta| below this take the power series (per-sample pieces of logged
+/// runs are all in this range).
 constexpr double kSmallPieceMax = 0.05;
 
-/// int_0^1 exp(i a u) expm1(delta u) du by Gauss-Legendre: 4 points for small pieces, else 16
-/// points per panel, one panel per radian of a (expm1 keeps it accurate for tiny delta).
+/// int_0^1 exp(i a u) expm1(delta u) du: a power series for small pieces, else Gauss-Legendre
+/// with 16 points per panel, one panel per radian of a (expm1 keeps it accurate for tiny delta).
 Complex damped_minus_undamped(double a, double delta) {
-  static const auto small = gauss_legendre_01<4>();
   static const auto nodes = gauss_legendre_01<16>();
   if (std::abs(a) <= kSmallPieceMax && std::abs(delta) <= kSmallPieceMax) {
-    Complex sum = 0.0;
-    for (const auto& [x, w] : small) sum += w * std::polar(1.0, a * x) * std::expm1(delta * x);
-    return sum;
+    // No transcendental call: with E(z) = int_0^1 e^{z u} du = sum_k z^k/(k+1)!, the integral
+    // is E(z1) - E(z2) for z1 = delta + i a, z2 = i a, and z1^k - z2^k = delta D_k with
+    // D_k = z1 D_{k-1} + z2^{k-1} (D_1 = 1), so nothing cancels. |z| <= 0.071: the first term
+    // left out (k = 13) is below 1e-25 relative.
+    const Complex z1(delta, a), z2(0.0, a);
+    Complex d = 1.0, z2_pow = 1.0, sum = 0.5;  // k = 1: D_1/2!
+    double factorial = 2.0;
+    for (int k = 2; k <= 12; ++k) {
+      z2_pow *= z2;
+      d = z1 * d + z2_pow;
+      factorial *= k + 1;
+      sum += d / factorial;
+    }
+    return delta * sum;
   }
   // A turn beyond the input limit (limits.hpp) would need more panels than is sensible: NaN,
   // which the verdicts report as untestable, rather than a hang or an overflowing count.
@@ -56,8 +65,8 @@ Complex damped_minus_undamped(double a, double delta) {
 /// heading variance V0 + dV u and noise intensity n along the piece,
 ///   e^{i theta0} [ int_0^1 e^{i a u} e^{-(V0 + dV u)/2} du (d + i n_td/2) - int_0^1 e^{i a u} du d ]
 /// written as e^{-V0/2} D drive - U d = expm1(-V0/2) D drive + (D - U) drive + U (i n_td/2),
-/// so nothing cancels when the variances are small.
-Complex noise_mean_of_piece(double heading, double d, double a, double v0, double dv,
+/// so nothing cancels when the variances are small. `rotation` is e^{i theta0}.
+Complex noise_mean_of_piece(Complex rotation, double d, double a, double v0, double dv,
                             double n_td) {
   // U = int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2)
   const double sinc_half = series::sinc(0.5 * a);
@@ -65,8 +74,8 @@ Complex noise_mean_of_piece(double heading, double d, double a, double v0, doubl
   const Complex extra = damped_minus_undamped(a, -0.5 * dv);  // D - U
   const Complex damped = undamped + extra;
   const Complex drive(d, 0.5 * n_td);
-  return std::polar(1.0, heading) * (std::expm1(-0.5 * v0) * damped * drive + extra * drive +
-                                     undamped * Complex(0.0, 0.5 * n_td));
+  return rotation * (std::expm1(-0.5 * v0) * damped * drive + extra * drive +
+                     undamped * Complex(0.0, 0.5 * n_td));
 }
 
 }  // namespace detail
@@ -82,7 +91,8 @@ Vector3 noise_induced_mean(const Path& path, const Robot& robot) {
     const ArcSegment seg = path.interval(i);
     const double a = seg.heading_change_rad(B);
     const Matrix2 n = wheel_noise_intensity(seg, B, robot.noise);
-    mean += detail::noise_mean_of_piece(heading, seg.center_m(), a, variance, n(0, 0), n(0, 1));
+    mean += detail::noise_mean_of_piece(std::polar(1.0, heading), seg.center_m(), a, variance,
+                                        n(0, 0), n(0, 1));
     heading += a;
     variance += n(0, 0);
   }

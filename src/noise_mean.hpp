@@ -7,9 +7,11 @@
 namespace odomcov::detail {
 
 /// One piece's share of the noise-induced mean, in the world frame, as x + i y: the piece starts
-/// at heading `heading` with accumulated heading variance v0, turns through a over the centre
-/// travel d, adds heading variance dv and has heading/travel noise intensity n_td.
-std::complex<double> noise_mean_of_piece(double heading, double d, double a, double v0, double dv,
-                                         double n_td);
+/// at the heading whose e^{i theta} is `rotation` (the caller's cosine and sine, so the engine
+/// computes them once per piece for this and its pose update) with accumulated heading variance v0,
+/// turns through a over the centre travel d, adds heading variance dv and has heading/travel noise
+/// intensity n_td.
+std::complex<double> noise_mean_of_piece(std::complex<double> rotation, double d, double a,
+                                         double v0, double dv, double n_td);
 
 }  // namespace odomcov::detail

@@ -160,13 +160,23 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
     const double a = r.angle_rad;
     const Matrix3 phi = arc_transition(d, a);
     const Matrix3 q = arc_noise_covariance(d, a, r.intensity);
-    const Eigen::MatrixXd A = arc_input_gain(d, a) * r.input_columns;
     const double v0 = P(2, 2);
-    const Matrix3 cross = phi * C * A.transpose();
-    P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
-    C = phi * C + A;
-    noise_mean += detail::noise_mean_of_piece(true_pose.z(), d, a, v0, P(2, 2) - v0, r.intensity(0, 1));
-    true_pose = compose(true_pose, arc_displacement(d, a));
+    if (constants == 0) {
+      P = phi * P * phi.transpose() + q;
+    } else {
+      const Eigen::MatrixXd A = arc_input_gain(d, a) * r.input_columns;
+      const Matrix3 cross = phi * C * A.transpose();
+      P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
+      C = phi * C + A;
+    }
+    // One cosine and sine of the heading serve the noise-induced mean and the pose update
+    // (compose's own arithmetic, inlined).
+    const double cos_h = std::cos(true_pose.z()), sin_h = std::sin(true_pose.z());
+    noise_mean +=
+        detail::noise_mean_of_piece(Complex(cos_h, sin_h), d, a, v0, P(2, 2) - v0, r.intensity(0, 1));
+    const Vector3 step = arc_displacement(d, a);
+    true_pose = {true_pose.x() + cos_h * step.x() - sin_h * step.y(),
+                 true_pose.y() + sin_h * step.x() + cos_h * step.y(), true_pose.z() + step.z()};
     odometry = drive(odometry, r.encoder, B);
     if constexpr (!std::is_same_v<std::decay_t<Each>, std::nullptr_t>) {
       each(Prediction{pose_error(true_pose, odometry), {noise_mean.real(), noise_mean.imag(), 0.0},

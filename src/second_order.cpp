@@ -97,6 +97,8 @@ struct Node {
   double m = 0.0;     // I_td/2 + g.G^d
   double g_gd = 0.0;  // g.G^d (own piece)
   double weight = 0.0;
+  double half_damping = 0.0;  // exp(-V/2)
+  double expm1_W = 0.0;       // expm1(W): C(s, t) for s < t when there are no per-run constants
   const double* g = nullptr;   // m entries
   const double* gd = nullptr;  // m entries, G^d of the node's piece
 };
@@ -134,6 +136,8 @@ void make_node(const Model& model, std::size_t k, double u, double weight, doubl
   node.g_gd = dot(g_buffer, node.gd, m);
   node.m = 0.5 * p.i_td + node.g_gd;
   node.weight = weight;
+  node.half_damping = std::exp(-0.5 * node.V);
+  node.expm1_W = std::expm1(node.W);
 }
 
 /// Adds the integrands of (3) and (4) for one pair s < t, times `weight`.
@@ -146,8 +150,11 @@ inline void add_pair(const Node& s, const Node& t, int m, double weight, Complex
     gs_gdt += s.g[i] * t.gd[i];
     gds_gdt += s.gd[i] * t.gd[i];
   }
-  const double c = s.W + gs_gt;  // C(s, t), s < t
-  const double e = weight * std::exp(-0.5 * (s.V + t.V));
+  // C(s, t) = W(s) + g(s).g(t) for s < t: without per-run constants a property of s alone.
+  // expm1(-C) = -expm1(C) / (1 + expm1(C)), exact and as accurate at small C.
+  const double em = m == 0 ? s.expm1_W : std::expm1(s.W + gs_gt);
+  const double em_minus = -em / (1.0 + em);
+  const double e = weight * s.half_damping * t.half_damping;
   const double kappa_s = -0.5 * s.i_td + s.g_gd - gt_gds;
   const double kappa_t = -0.5 * t.i_td + gs_gdt - t.g_gd;
   const double lambda_s = 1.5 * s.i_td + s.g_gd + gt_gds;
@@ -160,8 +167,38 @@ inline void add_pair(const Node& s, const Node& t, int m, double weight, Complex
                            t.d * (-s.i_td - gt_gds) + imag_common);
   const Complex diff_plus(gds_gdt - lambda_s * lambda_t + s.m * t.m,
                           t.d * (s.i_td + gt_gds) + imag_common);
-  sum_conj += s.A * std::conj(t.A) * (e * (std::expm1(c) * x_minus + diff_minus));
-  sum_plain += s.A * t.A * (e * (std::expm1(-c) * x_plus + diff_plus));
+  sum_conj += s.A * std::conj(t.A) * (e * (em * x_minus + diff_minus));
+  sum_plain += s.A * t.A * (e * (em_minus * x_plus + diff_plus));
+}
+
+/// add_pair summed over every pair of nodes in different pieces (s in the earlier one), when
+/// there are no per-run constants (m = 0). Then C(s, t) = W(s) and every factor of the
+/// integrands is a product of a function of s and one of t: with i_s = I_td(s), i_t = I_td(t),
+///   (3): conj(A_t) e_t [ d_t S1 + (i_t/2) S2 ],  S1 = sum_s A_s e_s w_s (em d_s - i em i_s/2 - i i_s),
+///                                                S2 = sum_s A_s e_s w_s (-i em d_s - em i_s/2 - i_s),
+///   (4): A_t e_t [ d_t T1 + (i_t/2) T2 ],        T1 = sum_s A_s e_s w_s (emm d_s + 3i emm i_s/2 + i i_s),
+///                                                T2 = sum_s A_s e_s w_s (i emm d_s - 3 emm i_s/2 - i_s)
+/// (em = expm1(W_s), emm = expm1(-W_s), e = exp(-V/2), w the weights), with S, T summed over
+/// the earlier pieces: O(nodes) instead of O(nodes^2), the same sums regrouped.
+void add_separable_pairs(const std::vector<Node>& nodes, Complex& sum_conj, Complex& sum_plain) {
+  Complex S1 = 0.0, S2 = 0.0, T1 = 0.0, T2 = 0.0;
+  for (std::size_t first = 0; first < nodes.size(); first += kQ) {
+    for (std::size_t b = first; b < first + kQ; ++b) {
+      const Node& t = nodes[b];
+      const double et = t.weight * t.half_damping;
+      sum_conj += std::conj(t.A) * et * (t.d * S1 + 0.5 * t.i_td * S2);
+      sum_plain += t.A * et * (t.d * T1 + 0.5 * t.i_td * T2);
+    }
+    for (std::size_t a = first; a < first + kQ; ++a) {
+      const Node& s = nodes[a];
+      const Complex p = s.A * (s.weight * s.half_damping);
+      const double em = s.expm1_W, emm = -em / (1.0 + em), is = s.i_td;
+      S1 += p * Complex(em * s.d, -0.5 * em * is - is);
+      S2 += p * Complex(-0.5 * em * is - is, -em * s.d);
+      T1 += p * Complex(emm * s.d, 1.5 * emm * is + is);
+      T2 += p * Complex(-1.5 * emm * is - is, emm * s.d);
+    }
+  }
 }
 
 /// The pieces of the order-2 quadrature: runs of identical consecutive pieces (model_pieces
@@ -298,11 +335,15 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
 
   // Double integrals (3), (4) over s < t.
   Complex sum_conj = 0.0, sum_plain = 0.0;
-  for (std::size_t b = 0; b < nodes.size(); ++b) {
-    const Node& t = nodes[b];
-    const std::size_t first_of_piece = (b / kQ) * kQ;
-    for (std::size_t a = 0; a < first_of_piece; ++a) {
-      add_pair(nodes[a], t, m, nodes[a].weight * t.weight, sum_conj, sum_plain);
+  if (m == 0) {
+    add_separable_pairs(nodes, sum_conj, sum_plain);
+  } else {
+    for (std::size_t b = 0; b < nodes.size(); ++b) {
+      const Node& t = nodes[b];
+      const std::size_t first_of_piece = (b / kQ) * kQ;
+      for (std::size_t a = 0; a < first_of_piece; ++a) {
+        add_pair(nodes[a], t, m, nodes[a].weight * t.weight, sum_conj, sum_plain);
+      }
     }
   }
   std::vector<double> g_sub(mm + 1);

@@ -22,10 +22,18 @@ namespace odomcov::series {
 /// kSincSeriesBelow only avoids 0/0. Truncation after x^6: |x|^8/9! < 1e-37 at the threshold.
 inline constexpr double kSincSeriesBelow = 1e-4;
 
+/// Between kSincSeriesBelow and kSincLongSeriesBelow a longer series (through x^14; the first
+/// omitted term, 0.125^16/17!, is below 1e-28) replaces the sine, which is the costly part of
+/// the per-sample pieces of logged runs.
+inline constexpr double kSincLongSeriesBelow = 0.125;
 inline double sinc(double x) {
-  if (std::abs(x) < kSincSeriesBelow) {
-    const double x2 = x * x;
-    return 1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0));
+  const double x2 = x * x;
+  if (std::abs(x) < kSincSeriesBelow) return 1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0));
+  if (std::abs(x) < kSincLongSeriesBelow) {
+    // Horner on x^2: 1 - x^2/3! (1 - x^2/(4 5) (1 - x^2/(6 7) (... (1 - x^2/(14 15)))))
+    double sum = 1.0;
+    for (int k = 7; k >= 1; --k) sum = 1.0 - x2 / ((2.0 * k) * (2.0 * k + 1.0)) * sum;
+    return sum;
   }
   return std::sin(x) / x;
 }
@@ -40,9 +48,11 @@ inline double u3(double y) {
   if (std::abs(y) >= kU3SeriesBelow) return (y - std::sin(y)) / (y * y * y);
   // Horner on y^2 with coefficients c_k = (-1)^k/(2k+3)!, built as ratios of successive terms:
   // c_{k+1}/c_k = -1/((2k+4)(2k+5)).
+  // Below 0.25, 7 terms suffice (first omitted term 0.25^14/17! < 1e-22).
+  const int terms = std::abs(y) < 0.25 ? 7 : kU3SeriesTerms;
   const double y2 = y * y;
   double sum = 1.0;
-  for (int k = kU3SeriesTerms - 2; k >= 0; --k) {
+  for (int k = terms - 2; k >= 0; --k) {
     sum = 1.0 - y2 / ((2.0 * k + 4.0) * (2.0 * k + 5.0)) * sum;
   }
   return sum / 6.0;
@@ -60,11 +70,13 @@ inline double a4(double x) {
   if (std::abs(x) >= kA4SeriesBelow) return 2.0 * (u3(x) - u3(2.0 * x)) / (x * x);
   // Terms t_n = (-1)^n (2^(2n-1) - 2) x^(2n-4)/(2n+1)!, summed smallest first.
   const double x2 = x * x;
+  // Below 0.125, 7 terms suffice (first omitted term 2^15 0.125^14/17! < 1e-22).
+  const int count = std::abs(x) < 0.125 ? 7 : kA4SeriesTerms;
   double terms[kA4SeriesTerms];
   double factorial = 120.0;  // (2n+1)! at n = 2
   double pow2 = 8.0;         // 2^(2n-1) at n = 2
   double xpow = 1.0;         // x^(2n-4) at n = 2
-  for (int i = 0; i < kA4SeriesTerms; ++i) {
+  for (int i = 0; i < count; ++i) {
     const int n = i + 2;
     const double sign = (n % 2 == 0) ? 1.0 : -1.0;
     terms[i] = sign * (pow2 - 2.0) * xpow / factorial;
@@ -73,7 +85,7 @@ inline double a4(double x) {
     xpow *= x2;
   }
   double sum = 0.0;
-  for (int i = kA4SeriesTerms - 1; i >= 0; --i) sum += terms[i];
+  for (int i = count - 1; i >= 0; --i) sum += terms[i];
   return sum;
 }
 

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -13,6 +14,15 @@
 #include "odomcov/likelihood.hpp"
 
 namespace odomcov {
+
+/// A robot parameter a fit can move ("k_left", "k_right", "wheelbase"): where it lives and its
+/// coordinate (src/effects/candidates.cpp, beside the effects' own parameters).
+struct RobotParameter {
+  std::string name;
+  double& (*ref)(Robot& robot);
+  FitCoordinate (*coordinate)(const Robot& robot);
+};
+const std::vector<RobotParameter>& robot_parameters();
 
 /// Names a fit can take: "k_left", "k_right", "wheelbase" (the nominal one, which the odometry
 /// uses) and "<effect>.<parameter>" for any catalogue effect. An effect not yet in the model is
@@ -23,6 +33,45 @@ std::string check_fit_parameter(const std::string& name, const EffectList& conte
 /// What a fit maximises: the full Gaussian likelihood, or its scatter part only
 /// (scatter_log_likelihood), for parameters that act on the covariance alone.
 enum class Likelihood { full, scatter };
+
+/// How a fit evaluates the likelihood.
+///  * `fast` (the default): linearise, optimise, re-anchor. At an anchor (the start, then each
+///    accepted point) every run's residual and covariance are computed exactly, and so are they
+///    at a few finite-difference points around it; from these each run's residual and covariance
+///    become a quadratic in the fitted values (per-parameter slope and curvature, and the
+///    pairwise cross terms), so a likelihood evaluation costs O(runs) instead of a propagation
+///    of every log. The optimum of that surrogate is evaluated exactly and becomes the next
+///    anchor when it raises the exact log-likelihood (else the step is halved); the loop ends
+///    when the exact log-likelihood stops improving (gain below kFitTolerance) or when the
+///    surrogate foretold the exact log-likelihood at its optimum to within kFitTolerance (a
+///    re-anchor could then gain no more than that: ~sqrt(2 kFitTolerance) = 0.045 standard
+///    errors in the parameters). At a fixed point
+///    the surrogate's gradient is the exact model's, so the answer is the exact model's optimum.
+///    Standard errors come from the last surrogate's derivatives.
+///  * `exact`: every likelihood evaluation propagates every run (the reference; slow).
+enum class FitPath { fast, exact };
+
+/// The fast path's tolerance in log-likelihood (see FitPath).
+inline constexpr double kFitTolerance = 1e-3;
+
+/// Exact residuals of one suite by model, each computed once: the fast path's anchors and
+/// difference points. Shared by fits from the same model (diagnose's candidates), so a
+/// parameter's sensitivity is propagated once per round. Effects whose values are all neutral
+/// do nothing and are left out of the key. Not thread-safe.
+class ResidualCache {
+ public:
+  explicit ResidualCache(const Suite& suite) : suite_(&suite) {}
+  /// The residuals of `model`, computed on the first request (then `counter` is incremented).
+  const std::vector<std::vector<RunResidual>>& at(const SuiteModel& model,
+                                                  std::atomic<std::int64_t>* counter = nullptr);
+  /// How many propagations of the whole suite the cache has run.
+  std::int64_t computed() const { return computed_; }
+
+ private:
+  const Suite* suite_;
+  std::map<std::string, std::vector<std::vector<RunResidual>>> by_model_;
+  std::int64_t computed_ = 0;
+};
 
 struct FitResult {
   std::vector<std::string> names;
@@ -35,7 +84,8 @@ struct FitResult {
   Eigen::VectorXd robust_stderrs;
   double log_likelihood_before = 0.0;  // the starting model (added effects at neutral)
   double log_likelihood_after = 0.0;   // of the kind maximised
-  int evaluations = 0;
+  int evaluations = 0;  // exact likelihood evaluations (propagations of every run)
+  int anchors = 0;      // fast path: the points it linearised at
   std::vector<std::string> warnings;
   SuiteModel model;  // the fitted model
 };
@@ -49,9 +99,16 @@ struct FitResult {
 /// sandwich with the runs' numerical scores.
 /// `evaluations`, when given, is incremented at every likelihood evaluation (for a progress
 /// display; the library itself prints nothing).
+/// `path` chooses the fast (linearised, re-anchored) or the exact evaluation (see FitPath);
+/// `cache`, when given, must belong to `suite` and is shared with other fast fits. On the fast
+/// path an effect named but absent joins at its typical size unless `cache` is given: then its
+/// fitted parameters start at their neutral values (the effect does nothing, so the start is
+/// the model the cache's sensitivities were taken around) and the others at their typical ones.
+/// `evaluations` counts the propagations of the whole suite (the exact likelihood evaluations).
 FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names,
               Likelihood likelihood = Likelihood::full,
-              std::atomic<std::int64_t>* evaluations = nullptr);
+              std::atomic<std::int64_t>* evaluations = nullptr, FitPath path = FitPath::fast,
+              ResidualCache* cache = nullptr);
 
 struct UmbmarkResult {
   double side_m = 0.0;

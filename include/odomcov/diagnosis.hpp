@@ -21,6 +21,38 @@ namespace odomcov {
 /// The candidate that refits the robot's wheel noise constants instead of adding an effect.
 inline constexpr const char* kWheelNoiseLevel = "wheel_noise_level";
 
+/// One kind of diagnose candidate: every catalogue effect (from its EffectInfo) and the robot
+/// candidates (wheel_noise_level), all described in src/effects/ so that diagnose holds no
+/// effect's name.
+struct CandidateType {
+  /// The effect's name, kWheelNoiseLevel, or "group_variation(E.p)" for a group candidate.
+  std::string name;
+  /// The effect whose spec holds the candidate's result (group_variation for a group candidate;
+  /// "" for a robot candidate).
+  std::string effect;
+  std::string physics, signature;  // plain words (EffectInfo)
+  bool systematic = false;         // judged on the full likelihood, else on its scatter part
+  bool heavy_tails = false;
+  /// The fit names it moves: "<effect>.<parameter>", or robot parameters ("k_left").
+  std::vector<std::string> fitted;
+  /// True when every fitted parameter's "no effect" value is the closed edge of its range (the
+  /// LRT is then a 50:50 chi^2 mixture [Self87]).
+  bool on_boundary = false;
+  bool robot = false;  // moves robot parameters (its YAML is the robot line), not an effect
+  std::string confused_with;         // EffectInfo::confused_with
+  CandidateCompletion complete = nullptr;
+  /// Specs added to the model before the fit, at their starting values (a user candidate's
+  /// given spec; a group candidate's varied effect when new, and group_variation). Empty: the
+  /// fit adds the effect with its fitted parameters at their neutral values.
+  EffectList start{};
+};
+/// The candidate of one effect (catalogue or custom), from its EffectInfo.
+CandidateType effect_candidate(const EffectInfo& info);
+/// Every candidate kind: the catalogue's effects in registry order, then the robot candidates.
+const std::vector<CandidateType>& candidate_types();
+/// nullptr when unknown.
+const CandidateType* find_candidate(const std::string& name);
+
 /// Family-wise level of diagnose's decision: the best candidate must have p < alpha/m over the
 /// m candidates (Bonferroni). 0.01 keeps false alarms near 1% while finding moderate effects.
 inline constexpr double kDiagnoseAlpha = 0.01;
@@ -49,6 +81,8 @@ struct Candidate {
   /// The experiments whose likelihood rose most, with the rise: where the effect showed.
   std::vector<std::pair<std::string, double>> evidence;
   std::string note;   // how a parameter was found when the likelihood cannot (bumps' sigma)
+  std::string physics, signature;  // its CandidateType's, for explain
+  bool robot = false;              // moves robot parameters: its YAML is the robot line
   SuiteModel model;   // the model with this candidate added
 };
 
@@ -72,9 +106,11 @@ struct Diagnosis {
   std::optional<OdometryCorrection> odometry_correction;
 };
 
-/// Runs every candidate (all catalogue effects not in the model plus wheel_noise_level, or the
-/// `only` subset, plus the user's `candidates`). Parameters of effects already in the model are refitted alongside each
-/// candidate, and the likelihood gain is measured against that refitted model.
+/// Runs every candidate (all catalogue effects not in the model, group_variation of the
+/// model's systematic parameters and of those that vary between groups when the suite has
+/// groups, and wheel_noise_level; or the `only` subset; plus the user's `candidates`).
+/// Parameters of effects already in the model are refitted alongside each candidate, and the
+/// likelihood gain is measured against that refitted model.
 ///
 /// Each candidate is fitted and judged on the part of the Gaussian likelihood it explains:
 /// systematic candidates (Ed, Eb, Es) on the full likelihood; random ones on its scatter part
@@ -94,9 +130,12 @@ struct DiagnoseProgress {
 };
 /// `candidates`: the user's own hypotheses (custom effects, or catalogue effects with starting
 /// values), tried beside the catalogue from their given values (diagnose --candidates).
+/// `path` is how every fit evaluates the likelihood (FitPath): the fast path shares one
+/// ResidualCache over the round, so each candidate parameter's sensitivity around the refitted
+/// model is propagated once.
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
                    const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr,
-                   const EffectList& candidates = {});
+                   const EffectList& candidates = {}, FitPath path = FitPath::fast);
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts

@@ -43,7 +43,36 @@ struct EffectParameterInfo {
   bool open_upper = false;
   double neutral = 0.0;  // the value at which the effect does nothing
   double typical = 0.0;  // a moderate size, e.g. for starting a fit
+  /// True for a size that plausibly changes between groups of runs (days, loads) even when the
+  /// model does not have its effect yet (wheelbase_error.Eb, wheel_diameter_ratio.Ed: tyre
+  /// pressure, load): diagnose then tries group_variation of it.
+  bool varies_between_groups = false;
 };
+
+/// How a fit moves one parameter: the coordinate u its optimiser sees (v = f(u)), the box and
+/// initial step in u, and the fast path's difference step in v, max(fd_abs, fd_rel |v - fd_origin|).
+struct FitCoordinate {
+  enum class Transform { log, atanh, sqrt, identity };
+  Transform transform = Transform::identity;
+  double lower_u = -1e300, upper_u = 1e300;
+  double step_u = 0.1;
+  double mid = 0.0, half = 1.0;  // atanh: the open interval (mid - half, mid + half)
+  double fd_abs = 0.0, fd_rel = 0.0, fd_origin = 0.0;
+};
+
+/// A parameter's fit coordinate, derived from its declared range: identity for a signed,
+/// unbounded one (reference_offset.dx); log for a positive scale factor, range (0, inf) with
+/// neutral 1 (Ed, Eb, Es; box [1/2, 2]); log for any other (0, inf) parameter (box typical
+/// x 1e-6 .. 1e6); scaled atanh for an open interval (a, b) (rho in (-1, 1)); square root for a
+/// size that may be zero, [0, inf) (slip, per-run sigma, bump rate).
+FitCoordinate fit_coordinate(const EffectParameterInfo& p);
+
+struct Suite;
+/// diagnose's completion of a candidate (EffectInfo::complete): `spec` holds the fitted values,
+/// `stderrs` one entry per parameter (NaN where not fitted); it sets what the likelihood cannot
+/// determine and returns a note on how, for the report ("" for none).
+using CandidateCompletion = std::string (*)(const Suite& suite, double wheelbase_m, EffectSpec& spec,
+                                            std::vector<double>& stderrs);
 
 struct EffectInfo {
   std::string name;
@@ -61,6 +90,15 @@ struct EffectInfo {
   /// one run alone, so the simulator of one path and the model of one run leave it out; synth
   /// draws it per group and the suite likelihood correlates the runs of a group (likelihood.hpp).
   bool grouped = false;
+  // ---- What diagnose needs to know (so that diagnosis and calibration hold no effect names).
+  /// The parameters diagnose fits for this candidate; empty: all of them (bumps: rate only, as
+  /// a Gaussian likelihood sees rate and sigma only through rate sigma^2).
+  std::vector<std::string> diagnose_fitted{};
+  /// What completes the candidate after its fit (bumps: sigma from the tails); may be nullptr.
+  CandidateCompletion complete = nullptr;
+  /// The candidate a Gaussian likelihood cannot tell this one apart from ("" for none): when both
+  /// are significant, heavy tails put the one with heavy_tails first, Gaussian tails the other.
+  std::string confused_with{};
 };
 
 /// A custom effect, defined in YAML: its own parameters and up to four expressions over the

@@ -22,6 +22,7 @@ struct DiagnoseOptions {
   double alpha = kDiagnoseAlpha;
   std::string json;
   int order = 2;
+  bool exact = false;
 };
 
 json summary_json(const ModelSummary& s) {
@@ -65,7 +66,8 @@ int run_diagnose(const DiagnoseOptions& opt) {
   ProgressBar bar([&progress] { return progress.fits_done.load(); },
                   std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
                   "fits");
-  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress, own);
+  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress, own,
+                               opt.exact ? FitPath::exact : FitPath::fast);
   bar.finish();
 
   std::ostringstream out;
@@ -196,6 +198,9 @@ void setup_diagnose(CLI::App& app, int& exit_code) {
                   "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
       ->capture_default_str();
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
+  cmd->add_flag("--exact", opt->exact,
+                "Propagate every run at every likelihood evaluation (slow; the reference for the "
+                "default linearised, re-anchored fit)");
   cmd->callback([opt, &exit_code] { exit_code = run_diagnose(*opt); });
 }
 

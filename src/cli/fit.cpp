@@ -19,6 +19,7 @@ struct FitOptions {
   std::vector<std::string> params;
   std::string json;
   int order = 2;
+  bool exact = false;
 };
 
 int run_fit(const FitOptions& opt) {
@@ -43,7 +44,8 @@ int run_fit(const FitOptions& opt) {
   ProgressBar bar([&evaluations] { return evaluations.load(); },
                   std::function<std::int64_t()>([] { return std::int64_t{0}; }),
                   "likelihood evaluations");
-  const FitResult r = fit(suite, model, opt.params, Likelihood::full, &evaluations);
+  const FitResult r = fit(suite, model, opt.params, Likelihood::full, &evaluations,
+                            opt.exact ? FitPath::exact : FitPath::fast);
   bar.finish();
 
   std::ostringstream out;
@@ -107,6 +109,9 @@ void setup_fit(CLI::App& app, int& exit_code) {
                   "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
       ->capture_default_str();
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
+  cmd->add_flag("--exact", opt->exact,
+                "Propagate every run at every likelihood evaluation (slow; the reference for the "
+                "default linearised, re-anchored fit)");
   cmd->callback([opt, &exit_code] { exit_code = run_fit(*opt); });
 }
 

@@ -6,8 +6,12 @@
 // rate sigma^2 m / 2 on each wheel over a piece of mean travel m. The tails are heavier than
 // that Gaussian: the signature diagnose looks for.
 #include <cmath>
+#include <limits>
 
 #include "effect.hpp"
+#include "odomcov/diagnosis.hpp"
+#include "odomcov/format.hpp"
+#include "odomcov/suite.hpp"
 
 namespace odomcov::effects {
 namespace {
@@ -60,6 +64,78 @@ class Bumps final : public Effect {
 
 }  // namespace
 
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+/// Sample excess kurtosis, bias-corrected (G2 of Joanes & Gill 1998).
+double excess_kurtosis(const std::vector<double>& x) {
+  const double n = static_cast<double>(x.size());
+  double mean = 0;
+  for (double v : x) mean += v / n;
+  double m2 = 0, m4 = 0;
+  for (double v : x) {
+    const double d = v - mean;
+    m2 += d * d / n;
+    m4 += d * d * d * d / n;
+  }
+  const double g2 = m4 / (m2 * m2) - 3.0;
+  return ((n + 1) * g2 + 6) * (n - 1) / ((n - 2) * (n - 3));
+}
+
+/// bumps' sigma by the method of moments on the straight-line experiments: along a line a bump
+/// J on one wheel moves the along-track error by J/2, so with Lambda = rate d bumps per run the
+/// fourth cumulant of the along-track error is 3 Lambda sigma^4/16 = (3/16) rate sigma^4 d,
+/// while q = rate sigma^2 is what the likelihood fitted. Pooling the lines (each cumulant from
+/// its sample excess kurtosis times its variance squared, weighted by travel) gives
+/// rate sigma^4 = (16/3) sum kappa4 / sum d and sigma^2 = rate sigma^4 / q. Returns NaN when no
+/// straight experiment of ten runs or more shows heavy tails.
+double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
+  double cumulant = 0.0, travel = 0.0;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    if (ex.logged || ex.runs.size() < 10) continue;
+    double d = 0;
+    bool straight = true;
+    for (std::size_t i = 0; i < ex.path.interval_count(); ++i) {
+      const ArcSegment s = ex.path.interval(i);
+      straight = straight && s.left_m == s.right_m;
+      d += std::abs(s.center_m());
+    }
+    if (!straight || d <= 0) continue;
+    std::vector<double> along;
+    for (const SuiteRun& r : ex.runs) along.push_back(run_error(ex, r, wheelbase_m).x());
+    double mean = 0, var = 0;
+    for (double v : along) mean += v / static_cast<double>(along.size());
+    for (double v : along) var += (v - mean) * (v - mean) / static_cast<double>(along.size() - 1);
+    cumulant += excess_kurtosis(along) * var * var;
+    travel += d;
+  }
+  if (!(travel > 0 && cumulant > 0 && q > 0)) return kNaN;
+  return std::sqrt(16.0 / 3.0 * cumulant / travel / q);
+}
+
+/// diagnose's completion (EffectInfo::complete): the likelihood fitted the rate with sigma held
+/// at its start, i.e. q = rate sigma^2; sigma comes from the tails (bumps_sigma), the rate is
+/// then q / sigma^2.
+std::string complete_bumps(const Suite& suite, double wheelbase_m, EffectSpec& spec,
+                           std::vector<double>& stderrs) {
+  const double sigma_fixed = spec.values[1];
+  const double q = spec.values[0] * sigma_fixed * sigma_fixed;
+  const double q_se = stderrs[0] * sigma_fixed * sigma_fixed;
+  const double sigma = bumps_sigma(suite, wheelbase_m, q);
+  const double s = std::isfinite(sigma) ? sigma : sigma_fixed;
+  spec.values = {q / (s * s), s};
+  stderrs = {q_se / (s * s), std::numeric_limits<double>::quiet_NaN()};
+  return "rate sigma^2 = " + format_number(q, "%.3g") + " +/- " + format_number(q_se, "%.1g") +
+         " m (what the means and covariances determine); " +
+         (std::isfinite(sigma) ? "sigma from the excess kurtosis of the along-track errors on "
+                                 "the straight lines (a moment estimate, no standard error)"
+                               : "sigma undetermined (no straight line with heavy tails), "
+                                 "kept at " + format_number(s, "%.3g") + " m");
+}
+
+}  // namespace
+
 EffectType bumps_type() {
   return {{"bumps",
            {{"rate", "1/m", 0.0, 1e300, false, false, 0.0, 0.5},
@@ -70,7 +146,12 @@ EffectType bumps_type() {
            "Poisson impulses at rate per metre of mean wheel travel, each N(0, sigma^2) on one "
            "wheel",
            /*systematic=*/false,
-           /*heavy_tails=*/true},
+           /*heavy_tails=*/true, /*grouped=*/false,
+           // diagnose fits the rate only (a Gaussian likelihood sees rate sigma^2), completes
+           // sigma from the tails, and lets the kurtosis decide against the noise level.
+           /*diagnose_fitted=*/{"rate"},
+           /*complete=*/complete_bumps,
+           /*confused_with=*/kWheelNoiseLevel},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<Bumps>(v[0], v[1]);
           }};

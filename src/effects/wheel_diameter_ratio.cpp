@@ -23,7 +23,7 @@ class WheelDiameterRatio final : public Effect {
 
 EffectType wheel_diameter_ratio_type() {
   return {{"wheel_diameter_ratio",
-           {{"Ed", "", 0.0, 1e300, true, false, 1.0, 1.004}},
+           {{"Ed", "", 0.0, 1e300, true, false, 1.0, 1.004, /*varies_between_groups=*/true}},
            "unequal wheel diameters (Ed = D_R/D_L)",
            "heading drifts on straight lines in proportion to distance (lateral error grows as "
            "distance squared); turns in either sense drift the same way",

@@ -18,7 +18,7 @@ class WheelbaseError final : public Effect {
 
 EffectType wheelbase_error_type() {
   return {{"wheelbase_error",
-           {{"Eb", "", 0.0, 1e300, true, false, 1.0, 1.01}},
+           {{"Eb", "", 0.0, 1e300, true, false, 1.0, 1.01, /*varies_between_groups=*/true}},
            "a wrong wheelbase (true wheelbase = Eb B)",
            "heading error proportional to the angle turned, changing sign with the turn "
            "direction; straight lines unaffected",

@@ -1,0 +1,118 @@
+// Cost of fit and diagnose on a real data set: all 171 OptiOdom runs (216 696 logged rows,
+// data/optiodom), imported into a temporary directory by the fixture, the model of order 2
+// (the default of fit and diagnose).
+//  * BM_Likelihood: one exact evaluation (every run propagated), the unit both paths pay;
+//  * BM_DiagnoseRound: one diagnose round from the plain model (11 candidates);
+//  * BM_Fit: the joint fit of Ed and Eb.
+// Each on the fast path (FitPath::fast: linearised, re-anchored) and, with
+// ODOMCOV_BENCH_EXACT=1 in the environment, the exact one (minutes per round). The counter
+// `propagations` is the number of exact likelihood evaluations per iteration.
+// Run: cmake --build build --target bench, or build/bench/diagnose_bench directly.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <unistd.h>
+
+#include "odomcov/calibration.hpp"
+#include "odomcov/diagnosis.hpp"
+#include "odomcov/optiodom.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+/// The whole OptiOdom set as a suite, imported once (as `odomcov import optiodom
+/// data/optiodom/data/diff/*/* --wheelbase 0.2 --diameters 0.084,0.084`).
+const odomcov::Suite& optiodom() {
+  static const odomcov::Suite suite = [] {
+    odomcov::OptiOdomOptions options;
+    for (const auto& type : fs::directory_iterator(ODOMCOV_SOURCE_DIR "/data/optiodom/data/diff")) {
+      for (const auto& session : fs::directory_iterator(type.path())) {
+        options.sessions.push_back(session.path().string());
+      }
+    }
+    std::sort(options.sessions.begin(), options.sessions.end());
+    options.wheelbase_m = 0.2;
+    options.diameters_m = {{0.084, 0.084}};
+    const fs::path dir = fs::temp_directory_path() / ("odomcov_bench_" + std::to_string(::getpid()));
+    for (const odomcov::ImportedFile& f : odomcov::import_optiodom(options)) {
+      const fs::path p = dir / f.path;
+      fs::create_directories(p.parent_path());
+      std::ofstream(p) << f.text;
+    }
+    odomcov::Suite s = odomcov::load_suite((dir / "suite.yaml").string());
+    fs::remove_all(dir);
+    return s;
+  }();
+  return suite;
+}
+
+std::size_t runs(const odomcov::Suite& suite) {
+  std::size_t n = 0;
+  for (const odomcov::SuiteExperiment& e : suite.experiments) n += e.runs.size();
+  return n;
+}
+
+odomcov::FitPath path_of(const benchmark::State& state) {
+  return state.range(0) == 0 ? odomcov::FitPath::fast : odomcov::FitPath::exact;
+}
+
+void BM_Likelihood(benchmark::State& state) {
+  const odomcov::Suite& suite = optiodom();
+  const odomcov::SuiteModel model = odomcov::suite_model(suite);
+  for (auto _ : state) benchmark::DoNotOptimize(odomcov::residuals(suite, model));
+  state.counters["runs"] = static_cast<double>(runs(suite));
+}
+
+void BM_DiagnoseRound(benchmark::State& state) {
+  const odomcov::Suite& suite = optiodom();
+  const odomcov::SuiteModel model = odomcov::suite_model(suite);
+  double propagations = 0;
+  for (auto _ : state) {
+    odomcov::DiagnoseProgress progress;
+    const odomcov::Diagnosis d =
+        odomcov::diagnose(suite, model, odomcov::kDiagnoseAlpha, {}, &progress, {},
+                          path_of(state));
+    benchmark::DoNotOptimize(d.after.nees_mean);
+    propagations = static_cast<double>(progress.evaluations.load());
+    state.counters["nees_after"] = d.after.nees_mean;
+  }
+  state.counters["propagations"] = propagations;
+  state.counters["runs"] = static_cast<double>(runs(suite));
+}
+
+void BM_Fit(benchmark::State& state) {
+  const odomcov::Suite& suite = optiodom();
+  const odomcov::SuiteModel model = odomcov::suite_model(suite);
+  double propagations = 0;
+  for (auto _ : state) {
+    std::atomic<std::int64_t> count{0};
+    const odomcov::FitResult f =
+        odomcov::fit(suite, model, {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"},
+                     odomcov::Likelihood::full, &count, path_of(state));
+    benchmark::DoNotOptimize(f.values);
+    propagations = static_cast<double>(count.load());
+    state.counters["log_likelihood"] = f.log_likelihood_after;
+  }
+  state.counters["propagations"] = propagations;
+}
+
+const bool kExact = std::getenv("ODOMCOV_BENCH_EXACT") != nullptr;
+
+BENCHMARK(BM_Likelihood)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
+BENCHMARK(BM_DiagnoseRound)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
+BENCHMARK(BM_Fit)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
+const bool kRegistered = kExact && [] {
+  benchmark::RegisterBenchmark("BM_DiagnoseRound/exact", [](benchmark::State& s) { BM_DiagnoseRound(s); })
+      ->Arg(1)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
+  benchmark::RegisterBenchmark("BM_Fit/exact", [](benchmark::State& s) { BM_Fit(s); })
+      ->Arg(1)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
+  return true;
+}();
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,154 @@
+// The fast fit path (FitPath::fast: a per-run quadratic surrogate from exact anchors, re-anchored
+// until the exact log-likelihood stops improving) against the exact one (every evaluation
+// propagates every run), on a synthetic suite and on real OptiOdom runs.
+//
+// Tolerances. Both paths maximise the same exact log-likelihood; the fast one stops when a step
+// gains less than kFitTolerance (1e-3) or the surrogate foretold the gain to that accuracy, so
+// near a quadratic optimum its log-likelihood is at most ~kFitTolerance below the maximum and
+// its parameters within sqrt(2 kFitTolerance) = 0.045 standard errors of the optimum. We allow
+// 0.1 standard errors and 0.01 in log-likelihood (ten times kFitTolerance: the exact path's own
+// BOBYQA stopping error comes on top). Standard errors agree to 10%: both are the curvature
+// at the optimum, by central differences of the exact model resp. of its surrogate.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <unistd.h>
+
+#include "odomcov/calibration.hpp"
+#include "odomcov/diagnosis.hpp"
+#include "odomcov/optiodom.hpp"
+#include "odomcov/world.hpp"
+
+namespace odomcov {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr double kLogLikelihoodTolerance = 0.01;
+constexpr double kStandardErrors = 0.1;
+
+Suite synth_suite(const WorldFile& w, const std::string& tag) {
+  const auto dir = fs::temp_directory_path() / ("odomcov_fast_" + tag + "_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  for (std::size_t i = 0; i < w.experiments.size(); ++i) {
+    std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
+  }
+  std::ofstream(dir / "suite.yaml") << suite_yaml(w);
+  Suite s = load_suite((dir / "suite.yaml").string());
+  fs::remove_all(dir);
+  return s;
+}
+
+/// The OptiOdom square sessions of data/optiodom (real runs with logged encoders), imported
+/// as `odomcov import optiodom data/optiodom/data/diff/square/* --wheelbase 0.2
+/// --diameters 0.084,0.084` would.
+Suite optiodom_squares() {
+  OptiOdomOptions o;
+  for (const auto& session : fs::directory_iterator(ODOMCOV_SOURCE_DIR "/data/optiodom/data/diff/square")) {
+    o.sessions.push_back(session.path().string());
+  }
+  std::sort(o.sessions.begin(), o.sessions.end());
+  o.wheelbase_m = 0.2;
+  o.diameters_m = {{0.084, 0.084}};
+  const auto dir = fs::temp_directory_path() / ("odomcov_fast_oo_" + std::to_string(::getpid()));
+  for (const ImportedFile& f : import_optiodom(o)) {
+    fs::create_directories((dir / f.path).parent_path());
+    std::ofstream(dir / f.path) << f.text;
+  }
+  Suite s = load_suite((dir / "suite.yaml").string());
+  fs::remove_all(dir);
+  return s;
+}
+
+void expect_same_fit(const Suite& suite, const SuiteModel& start, const std::vector<std::string>& names,
+                     Likelihood kind) {
+  const FitResult exact = fit(suite, start, names, kind, nullptr, FitPath::exact);
+  const FitResult fast = fit(suite, start, names, kind, nullptr, FitPath::fast);
+  EXPECT_NEAR(fast.log_likelihood_after, exact.log_likelihood_after, kLogLikelihoodTolerance);
+  EXPECT_DOUBLE_EQ(fast.log_likelihood_before, exact.log_likelihood_before);
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    ASSERT_TRUE(std::isfinite(exact.stderrs(k))) << names[i];
+    EXPECT_NEAR(fast.values(k), exact.values(k), kStandardErrors * exact.stderrs(k)) << names[i];
+    EXPECT_NEAR(fast.stderrs(k), exact.stderrs(k), 0.1 * exact.stderrs(k)) << names[i];
+  }
+  // The fast path propagates the suite far fewer times.
+  EXPECT_LT(fast.evaluations, exact.evaluations);
+}
+
+TEST(FastPath, FitMatchesExactOnASyntheticSuite) {
+  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "std");
+  const SuiteModel plain = suite_model(lab);
+  expect_same_fit(lab, plain, {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"}, Likelihood::full);
+  expect_same_fit(lab, plain, {"k_left", "k_right"}, Likelihood::scatter);
+  SuiteModel informed = plain;
+  informed.effects = {{"wheel_diameter_ratio", {1.003}}, {"wheelbase_error", {1.01}}};
+  expect_same_fit(lab, informed, {"wheel_noise_correlation.rho"}, Likelihood::scatter);
+}
+
+TEST(FastPath, FitMatchesExactOnOptiOdomSquares) {
+  const Suite squares = optiodom_squares();
+  ASSERT_GE(squares.experiments.size(), 10u);
+  expect_same_fit(squares, suite_model(squares), {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"},
+                  Likelihood::full);
+}
+
+TEST(FastPath, DiagnoseMatchesExact) {
+  // Every candidate of the catalogue: same significance and the same best, gains within the
+  // tolerance, and where a parameter has a standard error, the same value within 0.1 of it.
+  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "diag");
+  SuiteModel model = suite_model(lab);
+  model.effects = {{"wheel_diameter_ratio", {1.0}}};
+  const Diagnosis exact = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, {}, FitPath::exact);
+  const Diagnosis fast = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, {}, FitPath::fast);
+  ASSERT_EQ(fast.candidates.size(), exact.candidates.size());
+  ASSERT_TRUE(exact.best.has_value());
+  ASSERT_TRUE(fast.best.has_value());
+  EXPECT_EQ(fast.candidates[*fast.best].effect, exact.candidates[*exact.best].effect);
+  for (const Candidate& e : exact.candidates) {
+    const auto f = std::find_if(fast.candidates.begin(), fast.candidates.end(),
+                                [&](const Candidate& c) { return c.effect == e.effect; });
+    ASSERT_NE(f, fast.candidates.end()) << e.effect;
+    EXPECT_NEAR(f->delta_log_likelihood, e.delta_log_likelihood, kLogLikelihoodTolerance) << e.effect;
+    EXPECT_EQ(f->significant, e.significant) << e.effect;
+    for (std::size_t i = 0; i < e.values.size(); ++i) {
+      if (std::isfinite(e.stderrs[i])) {
+        EXPECT_NEAR(f->values[i], e.values[i], kStandardErrors * e.stderrs[i]) << e.effect << " " << e.parameters[i];
+      }
+    }
+  }
+  EXPECT_NEAR(fast.after.log_likelihood, exact.after.log_likelihood, kLogLikelihoodTolerance);
+}
+
+TEST(FastPath, EveryRegisteredParameterHasAFitCoordinateAndEveryEffectACandidate) {
+  // From the registry: a new effect is covered without touching this test.
+  for (const EffectInfo& e : effect_catalogue()) {
+    const CandidateType* c = find_candidate(e.name);
+    ASSERT_NE(c, nullptr) << e.name;
+    EXPECT_FALSE(c->fitted.empty()) << e.name;
+    EXPECT_EQ(c->systematic, e.systematic) << e.name;
+    for (const EffectParameterInfo& p : e.parameters) {
+      EXPECT_EQ(check_fit_parameter(e.name + "." + p.name), "") << e.name << "." << p.name;
+      const FitCoordinate f = fit_coordinate(p);
+      EXPECT_LT(f.lower_u, f.upper_u) << p.name;
+      EXPECT_GT(f.step_u, 0.0) << p.name;
+      // The typical size lies strictly inside the box the optimiser sees.
+      double u = p.typical;
+      switch (f.transform) {
+        case FitCoordinate::Transform::log: u = std::log(p.typical); break;
+        case FitCoordinate::Transform::atanh: u = std::atanh((p.typical - f.mid) / f.half); break;
+        case FitCoordinate::Transform::sqrt: u = std::sqrt(p.typical); break;
+        case FitCoordinate::Transform::identity: break;
+      }
+      EXPECT_GT(u, f.lower_u) << e.name << "." << p.name;
+      EXPECT_LT(u, f.upper_u) << e.name << "." << p.name;
+      if (p.lower <= -1e300) EXPECT_EQ(f.transform, FitCoordinate::Transform::identity) << p.name;
+    }
+  }
+  for (const RobotParameter& p : robot_parameters()) EXPECT_EQ(check_fit_parameter(p.name), "");
+}
+
+}  // namespace
+}  // namespace odomcov
