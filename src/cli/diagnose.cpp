@@ -37,40 +37,35 @@ json values_json(const Candidate& c, const std::vector<double>& values) {
   return out;
 }
 
-int run_diagnose(const DiagnoseOptions& opt) {
-  check_alpha(opt.alpha);
-  for (const std::string& e : opt.effects) {
+/// --effects: catalogue names, wheel_noise_level or group_variation(<effect>.<parameter>).
+void check_effect_names(const std::vector<std::string>& effects) {
+  for (const std::string& e : effects) {
     const std::string effect = e.substr(0, e.find('('));  // group_variation(wheelbase_error.Eb)
     if (e != kWheelNoiseLevel && !find_effect(effect)) throw UsageError("--effects: unknown effect '" + e + "'");
   }
-  if (!opt.json.empty()) check_output_path(opt.json);
-  const Suite suite = load_suite(opt.suite);
-  const EffectList own = opt.candidates.empty() ? EffectList{} : load_effects(opt.candidates);
+}
+
+/// --candidates FILE: the user's own hypotheses, each new to the suite's model and with a
+/// parameter to fit.
+EffectList load_candidates(const std::string& file, const Suite& suite) {
+  if (file.empty()) return {};
+  const EffectList own = load_effects(file);
   for (std::size_t i = 0; i < own.size(); ++i) {
     const int line = own[i].custom ? own[i].custom->line : 0;
     if (find_spec(suite.model_effects, own[i].name)) {
-      throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
+      throw InputError(file, line, "[" + std::to_string(i) + "]",
                        "name clash: " + quote(own[i].name) + " is already in the suite's model");
     }
     if (own[i].values.empty()) {
-      throw InputError(opt.candidates, line, "[" + std::to_string(i) + "]",
+      throw InputError(file, line, "[" + std::to_string(i) + "]",
                        "a candidate needs a parameter to fit (custom: parameters: {name: start})");
     }
   }
-  check_order(opt.order);
-  check_second_order_size(suite, opt.order);
-  SuiteModel model = suite_model(suite);
-  model.order = opt.order;
-  check_finite_start(suite, model, "diagnosis");
-  DiagnoseProgress progress;
-  ProgressBar bar([&progress] { return progress.fits_done.load(); },
-                  std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
-                  "fits");
-  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress, own,
-                               opt.exact ? FitPath::exact : FitPath::fast);
-  bar.finish();
+  return own;
+}
 
-  std::ostringstream out;
+/// The report's head, the candidates' table and the named effect with the model to adopt.
+void write_ranking(std::ostream& out, const Suite& suite, const Diagnosis& d) {
   out << "odomcov diagnose: " << suite.name << " (" << d.runs << " runs), family-wise alpha = "
       << d.alpha << " over " << d.candidates.size() << " candidates\n"
       << "before: log-likelihood " << fixed(d.before.log_likelihood, 2) << ", NEES mean "
@@ -100,82 +95,110 @@ int run_diagnose(const DiagnoseOptions& opt) {
         << "after: log-likelihood " << fixed(d.after.log_likelihood, 2) << ", NEES mean "
         << fixed(d.after.nees_mean, 3) << ", " << d.after.verdict << "\n";
   }
-  out << "\n" << verdict_text(d);
-  json correction = nullptr;
-  if (d.odometry_correction) {
-    const OdometryCorrection& c = *d.odometry_correction;
-    out << "\nThe odometry corrected by the model's systematic effects (UMBmark-style): wheelbase "
-        << format_number(c.wheelbase_m, "%.6g") << " m, wheel scales left "
-        << format_number(c.scale_left, "%.6g") << ", right " << format_number(c.scale_right, "%.6g")
-        << " (multiply each wheel's diameter by its scale).\n"
-        << "End-pose x-y error with the runs re-integrated, before and after [mm]:\n"
-        << "  kind          runs  mean before  mean after  Emax before  Emax after\n";
-    json kinds = json::array();
-    for (const CorrectionByKind& k : c.by_kind) {
-      char line[200];
-      std::snprintf(line, sizeof line, "  %-12s %5zu %12.1f %11.1f %12.1f %11.1f\n", k.kind.c_str(), k.runs, 1e3 * k.mean_xy_before_m, 1e3 * k.mean_xy_after_m,
-                    1e3 * k.emax_before_m, 1e3 * k.emax_after_m);
-      out << line;
-      kinds.push_back({{"kind", k.kind}, {"runs", k.runs}, {"mean_xy_before", k.mean_xy_before_m},
-                       {"mean_xy_after", k.mean_xy_after_m}, {"emax_sys_before", k.emax_before_m},
-                       {"emax_sys_after", k.emax_after_m}});
-    }
-    correction = {{"wheelbase", c.wheelbase_m}, {"scale_left", c.scale_left},
-                  {"scale_right", c.scale_right}, {"by_kind", kinds}};
-  }
-  std::cout << out.str();
+}
 
-  if (!opt.json.empty()) {
-    json candidates = json::array();
-    for (const Candidate& c : d.candidates) {
-      json evidence = json::array();
-      for (const auto& [name, gain] : c.evidence) evidence.push_back({{"experiment", name}, {"delta_log_likelihood", gain}});
-      candidates.push_back({{"effect", c.effect},
-                            {"parameters", values_json(c, c.values)},
-                            {"stderr", values_json(c, c.stderrs)},
-                            {"delta_log_likelihood", c.delta_log_likelihood},
-                            {"likelihood", c.systematic ? "full" : "scatter"},
-                            {"delta_full_log_likelihood", c.delta_full_log_likelihood},
-                            {"delta_bic", c.delta_bic},
-                            {"p_value", c.p_value},
-                            {"dof", c.dof},
-                            {"significant", c.significant},
-                            {"evidence", evidence},
-                            {"explanation", explain(c)},
-                            {"yaml", candidate_yaml(c, model)}});
-    }
-    json best = nullptr;
-    json after = summary_json(d.after);
-    if (d.best) {
-      const Candidate& b = d.candidates[*d.best];
-      best = {{"effect", b.effect}, {"parameters", values_json(b, b.values)}};
-      after["yaml"] = model_yaml(b.model);
-    }
-    json residuals = json::array();
-    for (const ResidualAlignment& a : d.residuals) {
-      residuals.push_back({{"feature", a.feature},
-                           {"p_value", a.testable ? json(a.p_value) : json(nullptr)},
-                           {"p_value_raw", a.testable ? json(a.p_value_raw) : json(nullptr)},
-                           {"statistic", a.testable ? json(a.statistic) : json(nullptr)},
-                           {"dof", {a.dof1, a.dof2}},
-                           {"testable", a.testable},
-                           {"description", a.description}});
-    }
-    json kurtosis = test_json(d.kurtosis);
-    kurtosis["heavy_tails"] = d.heavy_tails;
-    json report = {{"suite", suite.name},
-                   {"alpha", d.alpha},
-                   {"runs", d.runs},
-                   {"before", summary_json(d.before)},
-                   {"kurtosis", kurtosis},
-                   {"candidates", candidates},
-                   {"best", best},
-                   {"after", after},
-                   {"explained", d.explained},
-                   {"odometry_correction", correction}};
-    if (!d.explained) report["residuals"] = residuals;  // docs/json.md: there whenever not explained
-    write_json_atomic(opt.json, report);
+/// The corrected odometry (UMBmark-style) in words, and as JSON (null without one).
+json write_correction(std::ostream& out, const Diagnosis& d) {
+  if (!d.odometry_correction) return nullptr;
+  const OdometryCorrection& c = *d.odometry_correction;
+  out << "\nThe odometry corrected by the model's systematic effects (UMBmark-style): wheelbase "
+      << format_number(c.wheelbase_m, "%.6g") << " m, wheel scales left "
+      << format_number(c.scale_left, "%.6g") << ", right " << format_number(c.scale_right, "%.6g")
+      << " (multiply each wheel's diameter by its scale).\n"
+      << "End-pose x-y error with the runs re-integrated, before and after [mm]:\n"
+      << "  kind          runs  mean before  mean after  Emax before  Emax after\n";
+  json kinds = json::array();
+  for (const CorrectionByKind& k : c.by_kind) {
+    char line[200];
+    std::snprintf(line, sizeof line, "  %-12s %5zu %12.1f %11.1f %12.1f %11.1f\n", k.kind.c_str(), k.runs, 1e3 * k.mean_xy_before_m, 1e3 * k.mean_xy_after_m,
+                  1e3 * k.emax_before_m, 1e3 * k.emax_after_m);
+    out << line;
+    kinds.push_back({{"kind", k.kind}, {"runs", k.runs}, {"mean_xy_before", k.mean_xy_before_m},
+                     {"mean_xy_after", k.mean_xy_after_m}, {"emax_sys_before", k.emax_before_m},
+                     {"emax_sys_after", k.emax_after_m}});
   }
+  return {{"wheelbase", c.wheelbase_m}, {"scale_left", c.scale_left},
+          {"scale_right", c.scale_right}, {"by_kind", kinds}};
+}
+
+/// docs/json.md, "JSON of diagnose".
+json diagnosis_json(const Suite& suite, const SuiteModel& model, const Diagnosis& d, const json& correction) {
+  json candidates = json::array();
+  for (const Candidate& c : d.candidates) {
+    json evidence = json::array();
+    for (const auto& [name, gain] : c.evidence) evidence.push_back({{"experiment", name}, {"delta_log_likelihood", gain}});
+    candidates.push_back({{"effect", c.effect},
+                          {"parameters", values_json(c, c.values)},
+                          {"stderr", values_json(c, c.stderrs)},
+                          {"delta_log_likelihood", c.delta_log_likelihood},
+                          {"likelihood", c.systematic ? "full" : "scatter"},
+                          {"delta_full_log_likelihood", c.delta_full_log_likelihood},
+                          {"delta_bic", c.delta_bic},
+                          {"p_value", c.p_value},
+                          {"dof", c.dof},
+                          {"significant", c.significant},
+                          {"evidence", evidence},
+                          {"explanation", explain(c)},
+                          {"yaml", candidate_yaml(c, model)}});
+  }
+  json best = nullptr;
+  json after = summary_json(d.after);
+  if (d.best) {
+    const Candidate& b = d.candidates[*d.best];
+    best = {{"effect", b.effect}, {"parameters", values_json(b, b.values)}};
+    after["yaml"] = model_yaml(b.model);
+  }
+  json residuals = json::array();
+  for (const ResidualAlignment& a : d.residuals) {
+    residuals.push_back({{"feature", a.feature},
+                         {"p_value", a.testable ? json(a.p_value) : json(nullptr)},
+                         {"p_value_raw", a.testable ? json(a.p_value_raw) : json(nullptr)},
+                         {"statistic", a.testable ? json(a.statistic) : json(nullptr)},
+                         {"dof", {a.dof1, a.dof2}},
+                         {"testable", a.testable},
+                         {"description", a.description}});
+  }
+  json kurtosis = test_json(d.kurtosis);
+  kurtosis["heavy_tails"] = d.heavy_tails;
+  json report = {{"suite", suite.name},
+                 {"alpha", d.alpha},
+                 {"runs", d.runs},
+                 {"before", summary_json(d.before)},
+                 {"kurtosis", kurtosis},
+                 {"candidates", candidates},
+                 {"best", best},
+                 {"after", after},
+                 {"explained", d.explained},
+                 {"odometry_correction", correction}};
+  if (!d.explained) report["residuals"] = residuals;  // docs/json.md: there whenever not explained
+  return report;
+}
+
+int run_diagnose(const DiagnoseOptions& opt) {
+  check_alpha(opt.alpha);
+  check_effect_names(opt.effects);
+  if (!opt.json.empty()) check_output_path(opt.json);
+  const Suite suite = load_suite(opt.suite);
+  const EffectList own = load_candidates(opt.candidates, suite);
+  check_order(opt.order);
+  check_second_order_size(suite, opt.order);
+  SuiteModel model = suite_model(suite);
+  model.order = opt.order;
+  check_finite_start(suite, model, "diagnosis");
+  DiagnoseProgress progress;
+  ProgressBar bar([&progress] { return progress.fits_done.load(); },
+                  std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
+                  "fits");
+  const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress, own,
+                               opt.exact ? FitPath::exact : FitPath::fast);
+  bar.finish();
+
+  std::ostringstream out;
+  write_ranking(out, suite, d);
+  out << "\n" << verdict_text(d);
+  const json correction = write_correction(out, d);
+  std::cout << out.str();
+  if (!opt.json.empty()) write_json_atomic(opt.json, diagnosis_json(suite, model, d, correction));
   return kExitOk;
 }
 
