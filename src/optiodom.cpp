@@ -12,6 +12,7 @@
 #include "csv.hpp"
 #include "odomcov/error.hpp"
 #include "odomcov/format.hpp"
+#include "odomcov/limits.hpp"
 #include "odomcov/suite_writer.hpp"
 
 namespace odomcov {
@@ -138,6 +139,7 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
       const csv::Table table = csv::read_headerless(run_file.string(), 6);
       std::string log = "t,left,right,x,y,theta\n";
       double left = 0, right = 0, t_prev = -HUGE_VAL, turned = 0, travel = 0;
+      std::vector<ArcSegment> pieces;  // for the suite loader's own limits, checked here first
       for (std::size_t i = 0; i < table.rows.size(); ++i) {
         const csv::Row& row = table.rows[i];
         const double t = row.number(0);
@@ -147,6 +149,7 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
         const double dl = row.number(5) * metres_left, dr = row.number(4) * metres_right;
         left += dl;
         right += dr;
+        pieces.push_back({dl, dr});
         turned += (dr - dl) / wheelbase;
         travel += std::abs(0.5 * (dl + dr));
         // %.17g: Unix timestamps (1.7e9 s at 20 Hz) need more than ten digits to stay distinct.
@@ -160,6 +163,10 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
         log += "\n";
       }
       if (table.rows.size() < 2) throw InputError(run_file.string(), 0, "", "a run needs two rows or more");
+      // The written suite must load: a run beyond the loader's limits is refused here.
+      if (const std::string e = limits::check_pieces(pieces, wheelbase); !e.empty()) {
+        throw InputError(run_file.string(), 0, "", e);
+      }
       std::string direction;
       if (type == "square" || type == "circular" || type == "ivanjko") {
         direction = std::abs(turned) < kStraightBelowRad ? "-straight" : turned < 0 ? "-cw" : "-ccw";

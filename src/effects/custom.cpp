@@ -12,6 +12,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <utility>
 
@@ -167,6 +168,15 @@ std::string check_expression(const std::string& text, const std::vector<std::str
 }  // namespace
 
 std::string check_custom_expression(const std::string& text, const std::vector<std::string>& parameters) {
+  // muparser reads a C string: a NUL would cut the expression silently, and control or
+  // non-ASCII bytes cannot be part of a formula (nor be written back unchanged).
+  for (const unsigned char c : text) {
+    if (c < 0x20 || c > 0x7e) {
+      char byte[8];
+      std::snprintf(byte, sizeof byte, "0x%02x", c);
+      return std::string("an expression holds printable ASCII only (found byte ") + byte + ")";
+    }
+  }
   return check_expression(text, parameters, nullptr);
 }
 
