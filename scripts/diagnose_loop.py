@@ -62,6 +62,8 @@ FIT_PARAMS = {
 
 def fit_params(effect, parameters):
     """The `fit --params` names of a named effect with these parameters."""
+    if effect.startswith("group_variation("):  # its sd, and the varied parameter when it was new
+        return [p if "." in p else f"group_variation.{p}" for p in parameters]
     return FIT_PARAMS.get(effect, [f"{effect}.{p}" for p in parameters])
 
 
