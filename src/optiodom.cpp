@@ -150,12 +150,21 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
         left += dl;
         right += dr;
         pieces.push_back({dl, dr});
+        // The loader's checks of every value written (limits.hpp), so the suite always loads.
+        for (const auto& [value, column] : {std::pair{left, "left"}, std::pair{right, "right"}}) {
+          if (const std::string e = limits::check_length(value); !e.empty()) csv::fail(run_file.string(), row.line, column, e);
+        }
         turned += (dr - dl) / wheelbase;
         travel += std::abs(0.5 * (dl + dr));
         // %.17g: Unix timestamps (1.7e9 s at 20 Hz) need more than ten digits to stay distinct.
         log += format_number(t, "%.17g") + "," + format_number(left, "%.17g") + "," +
                format_number(right, "%.17g");
         if (i + 1 == table.rows.size()) {
+          for (int k = 0; k < 3; ++k) {
+            if (const std::string e = limits::check_length(reference[k]); !e.empty()) {
+              csv::fail(run_file.string(), row.line, k == 0 ? "x" : k == 1 ? "y" : "theta", e);
+            }
+          }
           log += "," + format_number(reference.x()) + "," + format_number(reference.y()) + "," + format_number(reference.z());
         } else {
           log += ",,,";
