@@ -25,19 +25,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   } catch (const InputError&) {
     return 0;
   }
-  const fs::path out = fuzz::scratch_dir("out");
-  for (const ImportedFile& f : files) {
-    fs::create_directories((out / f.path).parent_path());
-    fuzz::write_text(out / f.path, f.text);
-  }
-  try {
-    const Suite suite = load_suite((out / "suite.yaml").string());
-    // As the CLI: order 2 (the default) beyond its piece limit is refused, not computed.
-    if (second_order_problem(suite, suite_model(suite).order).empty()) {
-      compare(suite, suite_model(suite), 0.01);
-    }
-  } catch (const InputError& e) {
-    fuzz::invariant_failed(std::string("import wrote a suite that does not load: ") + e.what());
-  }
+  fuzz::check_imported_suite(files, "import optiodom");
   return 0;
 }

@@ -7,6 +7,11 @@
 #include <fstream>
 #include <regex>
 
+#include "odomcov/comparison.hpp"
+#include "odomcov/error.hpp"
+#include "odomcov/likelihood.hpp"
+#include "odomcov/suite.hpp"
+
 namespace odomcov::fuzz {
 namespace {
 
@@ -66,6 +71,23 @@ fs::path unpack(const std::uint8_t* data, std::size_t size, const std::string& m
 void invariant_failed(const std::string& what) {
   std::fprintf(stderr, "odomcov fuzz invariant failed: %s\n", what.c_str());
   std::abort();
+}
+
+void check_imported_suite(const std::vector<ImportedFile>& files, const std::string& importer) {
+  const fs::path out = scratch_dir("out");
+  for (const ImportedFile& f : files) {
+    fs::create_directories((out / f.path).parent_path());
+    write_text(out / f.path, f.text);
+  }
+  try {
+    const Suite suite = load_suite((out / "suite.yaml").string());
+    // As the CLI: order 2 (the default) beyond its piece limit is refused, not computed.
+    if (second_order_problem(suite, suite_model(suite).order).empty()) {
+      compare(suite, suite_model(suite), 0.01);
+    }
+  } catch (const InputError& e) {
+    invariant_failed(importer + " wrote a suite that does not load: " + e.what());
+  }
 }
 
 }  // namespace odomcov::fuzz

@@ -11,6 +11,9 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
+
+#include "odomcov/suite_writer.hpp"
 
 namespace odomcov::fuzz {
 
@@ -27,6 +30,11 @@ void write_text(const std::filesystem::path& path, const std::string& text);
 /// Stops the fuzzer with a message: an invariant of the target failed (e.g. what synth wrote does
 /// not load back). libFuzzer records the input as a crash.
 [[noreturn]] void invariant_failed(const std::string& what);
+
+/// What an importer wrote must load back as a suite and compare, as in the CLI (order 2 only
+/// within its piece limit): writes `files` under a scratch directory and checks that, else
+/// invariant_failed naming `importer`.
+void check_imported_suite(const std::vector<ImportedFile>& files, const std::string& importer);
 
 }  // namespace odomcov::fuzz
 
