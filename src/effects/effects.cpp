@@ -117,7 +117,7 @@ std::string check_group_target(const EffectList& list) {
     const EffectSpec* varied = nullptr;
     for (const EffectSpec& e : list) varied = e.name == effect && effect != kGroupVariation ? &e : varied;
     if (!varied) return "parameter '" + g.target + "': no effect " + effect + " in the list";
-    const EffectInfo* info = find_effect(effect);
+    const EffectInfo* info = info_of(*varied);  // a catalogue or a custom effect
     bool known = false;
     for (const EffectParameterInfo& p : info->parameters) known = known || p.name == param;
     if (!known) return "parameter '" + g.target + "': " + effect + " has no parameter " + param;
