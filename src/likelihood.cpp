@@ -30,9 +30,9 @@ Vector3 group_column(const std::vector<ArcSegment>& pieces, const std::vector<do
   const double h = 1e-6 * std::max(1.0, std::abs(value));
   EffectList shifted = effects;
   shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict(pieces, durations, robot, shifted).mean;
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted);
   shifted[target.effect].values[target.parameter] = value - h;
-  const Vector3 down = predict(pieces, durations, robot, shifted).mean;
+  const Vector3 down = predict_mean(pieces, durations, robot, shifted);
   return target.sd * (up - down) / (2.0 * h);
 }
 
