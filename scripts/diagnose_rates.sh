@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Benchmark of `odomcov diagnose` on blind worlds (issues 7 and 10): the rates over a mixed batch
-# of 112 worlds (7 cycles of: each effect of both catalogues alone, a wrong noise level, a
-# speed-dependent scale that is in no catalogue, two pairs of effects, and two worlds with
-# nothing hidden) and the false-alarm rate over 200 worlds with nothing hidden. Seeds are fixed,
+# of 112 worlds (cycles of 19: each effect of both catalogues alone, a wrong noise level, a
+# speed-dependent scale that is in no catalogue, group_variation of Eb, Ed and Es, two pairs of
+# effects, and two worlds with nothing hidden; about half of the others grouped too) and the
+# false-alarm rate over 200 worlds with nothing hidden (about half grouped). Seeds are fixed,
 # so the figures in results/diagnose/ are reproducible. The seeds were fixed after the method was
 # final: the batches used while developing it (seeds 11, 2027, 90210, 31337, 555) are not the
 # ones reported.
 #   scripts/diagnose_rates.sh            # both batches
-#   scripts/diagnose_rates.sh mixed      # one: mixed, none, or pilot (16 worlds, one cycle)
+#   scripts/diagnose_rates.sh mixed      # one: mixed, none, or pilot (16 worlds)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
