@@ -426,6 +426,7 @@ def cases(count, rng, kind):
             twice; every world but the speed scale's and the group_variation ones grouped on a
             coin flip;
     second: cycling through the second catalogue's effects and the speed scale;
+    group:  cycling through the group_variation cases (Eb, Ed, Es);
     ctest:  each effect alone, a noise level, the speed scale, two pairs of one systematic and one
             random effect (a calibration error with a noise source, the usual situation) and two
             with none, none of them grouped (no group_variation worlds yet: see
@@ -442,6 +443,8 @@ def cases(count, rng, kind):
     if kind == "second":
         pool = [[e] for e in SECOND] + [[SPEED_SCALE]]
         return [(pool[i % len(pool)], False) for i in range(count)]
+    if kind == "group":
+        return [([GROUP_CASES[i % len(GROUP_CASES)]], True) for i in range(count)]
     singles += [[g] for g in GROUP_CASES]
     out = []
     for i in range(count):
@@ -518,10 +521,12 @@ def main():
     parser.add_argument("--out", required=True)
     parser.add_argument("--check", action="store_true")
     parser.add_argument("--report", help="write every world's result and the rates as JSON")
-    parser.add_argument("--cases", choices=["mixed", "second", "ctest", "none"], default="mixed",
+    parser.add_argument("--cases", choices=["mixed", "second", "group", "ctest", "none"],
+                        default="mixed",
                         help="mixed: every kind of case in turn; second: the second catalogue "
-                             "and the speed scale; ctest: the blind suite's 16 worlds; none: "
-                             "nothing hidden (the false-alarm rate alone)")
+                             "and the speed scale; group: group_variation of Eb, Ed, Es in turn; "
+                             "ctest: the blind suite's 16 worlds; none: nothing hidden (the "
+                             "false-alarm rate alone)")
     args = parser.parse_args()
 
     rng = random.Random(args.seed)
