@@ -13,6 +13,7 @@
 
 #include <array>
 #include <cmath>
+#include <complex>
 
 #include "odomcov/closed_form.hpp"
 #include "series.hpp"
@@ -114,6 +115,24 @@ struct ArcFunctions : ArcStep {
     }
   }
 };
+
+/// x y for complex numbers, without std::complex's recovery of NaN products (its check costs a
+/// branch per product in the inner loops; finite inputs give the same value).
+inline std::complex<double> times(std::complex<double> x, std::complex<double> y) {
+  return {x.real() * y.real() - x.imag() * y.imag(), x.real() * y.imag() + x.imag() * y.real()};
+}
+
+/// e^{i x}; for |x| <= kUnitPolynomialBelow from the polynomials (sin x = x sinc x,
+/// cos x = 1 - (x^2/2) sinc^2(x/2); the sinc series' first term left out is below 1e-24 there).
+inline constexpr double kUnitPolynomialBelow = 0.25;
+inline std::complex<double> unit_complex(double x) {
+  if (std::abs(x) <= kUnitPolynomialBelow) {
+    const double x2 = x * x;
+    const double sinc_half = arc_poly::sinc(0.25 * x2);
+    return {1.0 - 0.5 * x2 * sinc_half * sinc_half, x * arc_poly::sinc(x2)};
+  }
+  return {std::cos(x), std::sin(x)};
+}
 
 /// The closed-form kernels (closed_form.hpp) from precomputed functions of the angle.
 Vector3 arc_displacement(double center_m, const ArcStep& f);

@@ -11,6 +11,7 @@
 #include "odomcov/limits.hpp"
 #include "odomcov/propagation.hpp"
 #include "quadrature.hpp"
+#include "arc_functions.hpp"
 #include "series.hpp"
 
 namespace odomcov {
@@ -19,20 +20,15 @@ namespace {
 
 using Complex = std::complex<double>;
 
-/// Pieces with |a| and |delta| below this take the power series (per-sample pieces of logged
-/// runs are all in this range).
-constexpr double kSmallPieceMax = 0.05;
+/// Pieces with |a| and |delta| up to this take the power series: every per-sample piece of a
+/// logged run and every model piece (kPieceMaxAngle), whose heading variance is far smaller.
+constexpr double kSmallPieceMax = 0.25;
 
-/// x y without std::complex's NaN recovery (the inputs are finite or the result is NaN anyway).
-Complex times(Complex x, Complex y) {
-  return {x.real() * y.real() - x.imag() * y.imag(), x.real() * y.imag() + x.imag() * y.real()};
-}
-
-/// 1/n! for n = 0..13, for the power series below.
-constexpr std::array<double, 14> kInverseFactorial = [] {
-  std::array<double, 14> out{};
+/// 1/n! for n = 0..17, for the power series below.
+constexpr std::array<double, 18> kInverseFactorial = [] {
+  std::array<double, 18> out{};
   double factorial = 1.0;
-  for (int n = 0; n < 14; ++n) {
+  for (int n = 0; n < 18; ++n) {
     factorial *= n > 0 ? n : 1;
     out[n] = 1.0 / factorial;
   }
@@ -47,10 +43,11 @@ Complex damped_minus_undamped(double a, double delta) {
     // No transcendental call: with E(z) = int_0^1 e^{z u} du = sum_k z^k/(k+1)!, the integral
     // is E(z1) - E(z2) for z1 = delta + i a, z2 = i a, and z1^k - z2^k = delta D_k with
     // D_k = z1 D_{k-1} + z2^{k-1} (D_1 = 1), so nothing cancels. |D_k| <= k r^(k-1) with
-    // r = |z1| <= 0.071, so summing through k = K leaves out at most (K+1) r^K/(K+2)!, below
-    // 2e-19 of the sum (~1/2) with K = 6 for r <= 0.002, 8 for r <= 0.02 and 12 up to 0.071.
+    // r = |z1| <= 0.36, so summing through k = K leaves out at most (K+1) r^K/(K+2)!, below
+    // 2e-19 of the sum (~1/2) with K = 6 for r <= 0.002, 8 for r <= 0.02, 12 for r <= 0.071
+    // and 16 up to 0.36.
     const double r2 = delta * delta + a * a;
-    const int last = r2 <= 0.002 * 0.002 ? 6 : r2 <= 0.02 * 0.02 ? 8 : 12;
+    const int last = r2 <= 0.002 * 0.002 ? 6 : r2 <= 0.02 * 0.02 ? 8 : r2 <= 0.071 * 0.071 ? 12 : 16;
     // In real arithmetic (std::complex's product checks for NaN at every step).
     double d_re = 1.0, d_im = 0.0, p_re = 1.0, p_im = 0.0, sum_re = 0.5, sum_im = 0.0;  // k = 1
     for (int k = 2; k <= last; ++k) {
@@ -102,7 +99,8 @@ Complex noise_mean_of_piece(Complex rotation, double d, double a, Complex undamp
   const Complex extra = damped_minus_undamped(a, -0.5 * dv);  // D - U
   const Complex damped = undamped + extra;
   const Complex drive(d, 0.5 * n_td);
-  return times(rotation, std::expm1(-0.5 * v0) * times(damped, drive) + times(extra, drive) +
+  using detail::times;
+  return times(rotation, series::expm1_small(-0.5 * v0) * times(damped, drive) + times(extra, drive) +
                              Complex(-0.5 * n_td * undamped.imag(), 0.5 * n_td * undamped.real()));
 }
 

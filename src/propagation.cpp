@@ -94,6 +94,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
   // One PieceModel serves every piece: its run columns keep their storage, so the loop does
   // not allocate. Without effects nothing reads the motion, and it is not computed.
   PieceModel m;
+  double inverse_for = 0.0, inverse = 0.0;  // 1/b for the true wheelbase b = inverse_for
   m.wheelbase_m = B;
   m.noise = robot.noise;
   auto add_piece = [&](const ArcSegment& encoder, double dt) {
@@ -118,13 +119,21 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
     r.wheelbase_true_m = m.wheelbase_factor * B;
     r.center_m = travel.center_m();
     r.angle_rad = travel.heading_change_rad(r.wheelbase_true_m);
-    Eigen::Matrix2d to_input;  // (e_L, e_R) -> (e_dtheta, e_d)
-    to_input << -1.0 / r.wheelbase_true_m, 1.0 / r.wheelbase_true_m, 0.5, 0.5;
-    r.intensity = to_input * m.wheel_cov * to_input.transpose();
-    r.intensity(0, 0) += m.heading_var;
+    if (r.wheelbase_true_m != inverse_for) {  // 1/b changes only with the wheelbase factor
+      inverse_for = r.wheelbase_true_m;
+      inverse = 1.0 / inverse_for;
+    }
+    // (e_L, e_R) -> (e_dtheta, e_d) = ((e_R - e_L)/b, (e_L + e_R)/2), applied to the wheel
+    // covariance W on both sides, written out.
+    const double w11 = m.wheel_cov(0, 0), w22 = m.wheel_cov(1, 1);
+    const double w12 = 0.5 * (m.wheel_cov(0, 1) + m.wheel_cov(1, 0));
+    r.intensity(0, 0) = (w11 - 2.0 * w12 + w22) * inverse * inverse + m.heading_var;
+    r.intensity(0, 1) = r.intensity(1, 0) = 0.5 * (w22 - w11) * inverse;
+    r.intensity(1, 1) = 0.25 * (w11 + 2.0 * w12 + w22);
     r.input_columns.resize(2, out.run_constants);
     for (int c = 0; c < out.run_constants; ++c) {
-      r.input_columns.col(c) = to_input * m.run_columns.at(static_cast<std::size_t>(c));
+      const Eigen::Vector2d& w = m.run_columns.at(static_cast<std::size_t>(c));
+      r.input_columns.col(c) << (w.y() - w.x()) * inverse, 0.5 * (w.x() + w.y());
     }
   };
   for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
@@ -182,6 +191,29 @@ class PoseWalker {
   int count_ = 0;
 };
 
+/// phi P phi^T for the arc transition phi = [c s y; -s c x; 0 0 1] (arc_transition) and a
+/// symmetric P, written out: the zeros and ones of phi cost nothing.
+Matrix3 transition_congruence(const detail::ArcStep& f, double d, const Matrix3& P) {
+  const double c = f.cos1, s = f.sin1, x = f.chord_x(d), y = f.chord_y(d);
+  // M = phi P (rows 0 and 1; row 2 is P's)
+  double m0[3], m1[3];
+  for (int j = 0; j < 3; ++j) {
+    m0[j] = c * P(0, j) + s * P(1, j) + y * P(2, j);
+    m1[j] = -s * P(0, j) + c * P(1, j) + x * P(2, j);
+  }
+  Matrix3 out;
+  out(0, 0) = c * m0[0] + s * m0[1] + y * m0[2];
+  out(0, 1) = -s * m0[0] + c * m0[1] + x * m0[2];
+  out(1, 1) = -s * m1[0] + c * m1[1] + x * m1[2];
+  out(0, 2) = m0[2];
+  out(1, 2) = m1[2];
+  out(2, 2) = P(2, 2);
+  out(1, 0) = out(0, 1);
+  out(2, 0) = out(0, 2);
+  out(2, 1) = out(1, 2);
+  return out;
+}
+
 /// The engine's loop; `each` (when not nullptr) sees the prediction after every piece.
 template <class Each>
 Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
@@ -202,12 +234,12 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
     const double a = r.angle_rad;
     // One evaluation of the angle's functions serves every kernel below.
     const detail::ArcFunctions f(a);
-    const Matrix3 phi = detail::arc_transition(d, f);
     const Matrix3 q = detail::arc_noise_covariance(d, f, r.intensity);
     const double v0 = P(2, 2);
     if (constants == 0) {
-      P = phi * P * phi.transpose() + q;
+      P = transition_congruence(f, d, P) + q;
     } else {
+      const Matrix3 phi = detail::arc_transition(d, f);
       const Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, effects::kMaxRunConstants> A =
           detail::arc_input_gain(d, f) * r.input_columns;
       const Matrix3 cross = phi * C * A.transpose();

@@ -198,7 +198,7 @@ class Effect {
 /// and any higher-order propagator consume these, so effects are modelled in one place.
 /// The most standard-normal per-run constants a model may carry (per_run_radius has two); the
 /// engine keeps their columns in fixed storage.
-inline constexpr int kMaxRunConstants = 8;
+inline constexpr int kMaxRunConstants = 4;
 
 struct ResolvedPiece {
   ArcSegment encoder;            // encoder travel over the piece
