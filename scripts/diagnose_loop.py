@@ -346,6 +346,12 @@ def loop(odomcov, suite, out, rounds, candidates=None, order=None):
     return report
 
 
+def plus_minus(value, stderr, digits=6):
+    """value ± its standard error, or "(not identified)" when the fit has none (a singular
+    information matrix: two effects the data cannot tell apart)."""
+    return f"{value:.{digits}g} ± " + (f"{stderr:.2g}" if stderr is not None else "(not identified)")
+
+
 def _yes_no(flag):
     return "" if flag is None else ("yes" if flag else "no")
 
@@ -490,9 +496,10 @@ def markdown(report):
     rows.append(f"- `compare` with the loop's model: {summary(report['compare_after'])}.")
     fit = report["fit"]
     if fit:
-        values = ", ".join(f"{k} = {v:.6g} ± {fit['stderr'][k]:.2g}"
+        values = ", ".join(f"{k} = {plus_minus(v, fit['stderr'][k])}"
                            for k, v in fit["parameters"].items())
         rows.append(f"- Joint fit of everything named, full likelihood: {values}.")
+        rows.extend(f"- The joint fit warns: {w}." for w in fit.get("warnings", []))
         rows.append(f"- `compare` with the joint fit: {summary(report['compare_fit'])}.")
     elif report.get("fit_error"):
         rows.append(f"- The joint fit failed: {report['fit_error']}")

@@ -45,23 +45,30 @@ void check_effect_names(const std::vector<std::string>& effects) {
   }
 }
 
-/// --candidates FILE: the user's own hypotheses, each new to the suite's model and with a
-/// parameter to fit.
+/// --candidates FILE: the user's own hypotheses, each with a parameter to fit. A candidate the
+/// suite's model already has (the same catalogue effect, or a custom one with the same
+/// definition, adopted in an earlier round) is left out, as the catalogue's are; a custom one
+/// with the name of a different effect in the model is a clash.
 EffectList load_candidates(const std::string& file, const Suite& suite) {
   if (file.empty()) return {};
+  EffectList candidates;
   const EffectList own = load_effects(file);
   for (std::size_t i = 0; i < own.size(); ++i) {
     const int line = own[i].custom ? own[i].custom->line : 0;
-    if (find_spec(suite.model_effects, own[i].name)) {
-      throw InputError(file, line, "[" + std::to_string(i) + "]",
-                       "name clash: " + quote(own[i].name) + " is already in the suite's model");
-    }
     if (own[i].values.empty()) {
       throw InputError(file, line, "[" + std::to_string(i) + "]",
                        "a candidate needs a parameter to fit (custom: parameters: {name: start})");
     }
+    const EffectSpec* in_model = find_spec(suite.model_effects, own[i].name);
+    if (!in_model) {
+      candidates.push_back(own[i]);
+    } else if (own[i].custom && !(in_model->custom && *in_model->custom == *own[i].custom)) {
+      throw InputError(file, line, "[" + std::to_string(i) + "]",
+                       "name clash: " + quote(own[i].name) +
+                           " is already in the suite's model with another definition");
+    }
   }
-  return own;
+  return candidates;
 }
 
 /// The report's head, the candidates' table and the named effect with the model to adopt.
