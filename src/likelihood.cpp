@@ -82,6 +82,13 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     }
     for (std::size_t r = 0; r < ex.runs.size(); ++r) work.emplace_back(e, r);
   }
+  // The longest logged runs first, so that no core is left with a long one at the end (the
+  // results go to their own slots: the order changes no number).
+  auto length = [&](const std::pair<std::size_t, std::size_t>& w) {
+    const SuiteExperiment& ex = suite.experiments[w.first];
+    return ex.logged ? ex.runs[w.second].pieces.size() : std::size_t{0};
+  };
+  std::stable_sort(work.begin(), work.end(), [&](const auto& a, const auto& b) { return length(a) > length(b); });
   tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
     const auto [e, r] = work[w];
     const SuiteExperiment& ex = suite.experiments[e];
