@@ -23,18 +23,19 @@ constexpr int kDim = 3;
 /// mean (exact for the perturbed path at any order) in the varied parameter, from `mean`, the
 /// mean at the parameter's value. A logged run passes its prediction's: on fine pieces
 /// predict_with_order's mean is predict's, bit for bit predict_mean's (on pieces it cannot
-/// coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative). The step is 1e-7
+/// coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative), and its odometry
+/// end pose, which the shifted parameter does not change. The step is 1e-7
 /// of the parameter's size (at least 1e-7): truncation ~h |mu''/mu'| ~ 1e-7 of the column,
 /// rounding ~eps |mu|/(h |mu'|) far below. One mean-only propagation per run.
 Vector3 group_column(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
                      const Robot& robot, const EffectList& effects, const GroupTarget& target,
-                     const Vector3& mean) {
+                     const Vector3& mean, const Vector3* odometry_end_pose = nullptr) {
   if (!target.present || target.sd == 0.0) return Vector3::Zero();
   const double value = effects[target.effect].values[target.parameter];
   const double h = 1e-7 * std::max(1.0, std::abs(value));
   EffectList shifted = effects;
   shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict_mean(pieces, durations, robot, shifted);
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
   return target.sd * (up - mean) / h;
 }
 
@@ -81,6 +82,13 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     }
     for (std::size_t r = 0; r < ex.runs.size(); ++r) work.emplace_back(e, r);
   }
+  // The longest logged runs first, so that no core is left with a long one at the end (the
+  // results go to their own slots: the order changes no number).
+  auto length = [&](const std::pair<std::size_t, std::size_t>& w) {
+    const SuiteExperiment& ex = suite.experiments[w.first];
+    return ex.logged ? ex.runs[w.second].pieces.size() : std::size_t{0};
+  };
+  std::stable_sort(work.begin(), work.end(), [&](const auto& a, const auto& b) { return length(a) > length(b); });
   tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
     const auto [e, r] = work[w];
     const SuiteExperiment& ex = suite.experiments[e];
@@ -91,7 +99,8 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
           predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
       out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean,
                    p.cov + meas,
-                   group_column(run.pieces, run.durations_s, model.robot, model.effects, target, p.mean),
+                   group_column(run.pieces, run.durations_s, model.robot, model.effects, target, p.mean,
+                                &p.odometry_end_pose),
                    group};
       return;
     }
