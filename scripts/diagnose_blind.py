@@ -5,7 +5,8 @@ A seeded generator makes worlds the diagnosis has never seen: a random robot, wh
 measurement noise; the standard experiment set with random geometry (line lengths, spin angles,
 arc radii, square sides) and run counts; and a hidden truth drawn from the catalogue at a
 moderate, random size: one effect, a wheel noise level that differs from the nominal robot's,
-two effects, or nothing. For each world it runs the loop a user would run:
+two effects, a systematic parameter that varies between experiment groups (group_variation), or
+nothing. For each world it runs the loop a user would run:
 
     odomcov synth world.yaml --out lab/
     repeat: odomcov diagnose lab/suite.yaml; adopt the model it proposes (the effect added)
@@ -22,6 +23,26 @@ and scores it against the truth:
     estimate is close to symmetric; factors and the correlation (Ed, Eb, Es, rho) directly;
   * consistent: `compare` finds the model the loop built consistent.
 A world with nothing hidden in which an effect is named is a false alarm.
+
+Grouped worlds. A group_variation world drives the standard experiment set once per group
+(4-8 groups, `group: day-J`, 4-8 runs per experiment and group), and draws a systematic
+parameter E.p (wheelbase_error.Eb, wheel_diameter_ratio.Ed or scale_error.Es) once per group
+from N(mean, sd^2). The right answer is diagnose's candidate `group_variation(E.p)`. For Eb and
+Ed the mean is half the time neutral (1: the effect itself absent, only its spread) and half the
+time off by a size drawn as for the effect alone; for Es it is always off (diagnose offers
+group_variation(scale_error.Es) only once scale_error is in the model, as for any parameter that
+is not in the catalogue's list of those that vary between groups). The candidate
+group_variation(E.p) adds E when the model lacks it and fits E.p beside sd, so it stands for E
+too: "named right" compares the named and hidden sets with E dropped wherever
+group_variation(E.p) is in the set. Naming E in one round and group_variation(E.p) in a later
+one, or group_variation(E.p) alone, is right whether the mean is off or neutral (with neutral
+mean the groups' draws still average to a mean that is off by about sd/sqrt(groups), which the
+data do show). Naming E without group_variation(E.p), or another parameter's group_variation, is
+a miss. Recovered: sd within 3 SE on the log scale, and E.p's mean (1 where neutral) within 3 SE
+of the joint fit, whose SE includes the between-group spread. Some worlds of other kinds (half
+of the mixed batch's, other than the speed scale, and half of the nothing-hidden batch's) are
+grouped the same way with nothing varying between groups: a group_variation named there is a
+false alarm of the group candidates, counted apart (group_false_alarms over grouped_without_group).
 
 Usage:
   diagnose_blind.py --odomcov BIN --seed S --worlds N --out DIR [--check] [--report FILE.json]
@@ -64,6 +85,20 @@ SECOND = {
     "reference_offset": ("dx", "dy"),
 }
 EFFECTS = list(SIZES) + list(SECOND)
+# group_variation: the parameters it varies in the blind worlds and their between-group sd
+# (log-uniform in [lo, hi], a fifth to a third of the effect's own sizes: one sd shifts a 10 rad
+# spin by 8-40 mrad (Eb), a 10 m line's heading by 10-40 mrad (Ed, B = 0.5 m), its length by
+# 10-40 mm (Es), against a group mean's SE of a few mrad or mm), whether the mean may be
+# neutral, and the groups and runs per experiment and group of a grouped world.
+GROUP = "group_variation"
+GROUP_TARGETS = {
+    "wheelbase_error.Eb": (0.0008, 0.004, True),
+    "wheel_diameter_ratio.Ed": (0.0005, 0.002, True),
+    "scale_error.Es": (0.001, 0.004, False),
+}
+GROUP_CASES = [f"{GROUP}({t})" for t in GROUP_TARGETS]
+GROUPS = (4, 8)
+GROUP_RUNS = (4, 8)
 # An effect in no catalogue: the distance scale grows with speed, Es(v) = 1 + a (v - V0), with
 # a = +-0.01..0.03 per m/s. Its worlds drive every experiment at SPEEDS (two copies, slow- and
 # fast-). The loop must end unexplained, with the residuals pointing at `speed`, and a custom
@@ -141,16 +176,49 @@ def _render(head, effects, tail, experiments, speeds, prefixes):
     speed (with each speed's name prefix)."""
     lines = head + ["  effects:" + ("" if effects else " []")] + effects + tail + ["experiments:"]
     for speed, prefix in zip(speeds, prefixes):
-        for name, runs, segments in experiments:
-            lines.extend([f"  - name: {prefix}{name}", f"    runs: {runs}",
-                          f"    path: {{sample_rate: 50, speed: {speed}, segments: [{segments}]}}"])
+        for name, runs, segments, *group in experiments:
+            path = f"{{sample_rate: 50, speed: {speed}, segments: [{segments}]}}"
+            lines.extend([f"  - name: {prefix}{name}", f"    runs: {runs}"]
+                         + [f"    group: {g}" for g in group] + [f"    path: {path}"])
     return "\n".join(lines) + "\n"
 
 
-def world_yaml(rng, index, hidden, custom=False):
-    """A random world; `hidden` is a list of effect names, possibly with NOISE_LEVEL or
-    SPEED_SCALE. Returns ([world YAML text, ...], truth): one world, or for SPEED_SCALE without
-    custom effects one world per speed, each with that speed's scale_error (to be merged)."""
+def group_target(name):
+    """'wheelbase_error.Eb' of 'group_variation(wheelbase_error.Eb)', else None."""
+    return name[len(GROUP) + 1:-1] if name.startswith(GROUP + "(") else None
+
+
+def draw_group(rng, name):
+    """A group_variation world's truth {E.p: mean, "sd": sd} and its effect lines: E at the
+    mean (neutral half the time where allowed), then group_variation of E.p."""
+    target = group_target(name)
+    effect, param = target.split(".")
+    lo, hi, may_be_neutral = GROUP_TARGETS[target]
+    sd = log_uniform(rng, lo, hi)
+    mean = 1.0
+    if not may_be_neutral or rng.random() < 0.5:
+        mean = draw_effect(rng, effect)[0][param]
+    lines = [f"    - {effect}: {{{param}: {mean:.8g}}}",
+             f"    - {GROUP}: {{parameter: {target}, sd: {sd:.6g}}}"]
+    return {target: mean, "sd": sd}, lines
+
+
+def _grouped(rng, experiments):
+    """The experiment set driven once per group (4-8 groups, 4-8 runs per experiment and
+    group): [(name, runs, segments, group)]."""
+    out = []
+    for j in range(1, rng.randint(*GROUPS) + 1):
+        out.extend((f"day{j}-{name}", rng.randint(*GROUP_RUNS), segments, f"day-{j}")
+                   for name, _, segments in experiments)
+    return out
+
+
+def world_yaml(rng, index, hidden, custom=False, grouped=False):
+    """A random world; `hidden` is a list of effect names, possibly with NOISE_LEVEL,
+    SPEED_SCALE or a group_variation case; `grouped`: its experiments in groups (always for a
+    group_variation case). Returns ([world YAML text, ...], truth): one world, or for SPEED_SCALE
+    without custom effects one world per speed, each with that speed's scale_error (to be
+    merged)."""
     b = rng.uniform(0.3, 0.6)
     cap = K_FIRST_ORDER * b * b
     k = log_uniform(rng, 0.5e-3, min(2e-3, cap / 1.25))
@@ -172,6 +240,10 @@ def world_yaml(rng, index, hidden, custom=False):
         head += [f"  k_left: {k_left * f_left:.6g}", f"  k_right: {k_right * f_right:.6g}"]
     effects = []
     for name in (h for h in hidden if h not in (NOISE_LEVEL, SPEED_SCALE)):
+        if group_target(name):
+            truth[name], lines = draw_group(rng, name)
+            effects.extend(lines)
+            continue
         params, text = draw_effect(rng, name)
         truth[name] = params
         effects.append(f"    - {name}: {text}")
@@ -179,6 +251,8 @@ def world_yaml(rng, index, hidden, custom=False):
     tail = [f"measurement_noise: {{xy: {xy:.4g}, theta_deg: {rng.uniform(0.05, 0.2):.3g}}}",
             f"seed: {rng.randrange(1 << 40)}"]
     experiments = _experiments(rng)
+    if grouped or any(group_target(h) for h in hidden):
+        experiments = _grouped(rng, experiments)
     if SPEED_SCALE not in hidden:
         return [_render(head, effects, tail, experiments, [0.3], [""])], truth
     a = signed(rng, 0.01, 0.03)
@@ -239,6 +313,11 @@ def _checks(name, truth, fit, suite):
     if name == NOISE_LEVEL:
         return [(f"k_{w}", truth[NOISE_LEVEL][f"k_{w}"], fit["parameters"][f"k_{w}"],
                  fit["stderr"][f"k_{w}"]) for w in ("left", "right")]
+    target = group_target(name)
+    if target:
+        return [(f"{GROUP}.sd", truth[name]["sd"], fit["parameters"][f"{GROUP}.sd"],
+                 fit["stderr"][f"{GROUP}.sd"]),
+                (target, truth[name][target], fit["parameters"][target], fit["stderr"][target])]
     if name == "bumps":
         sigma_fit = next(line for line in open(suite) if "bumps:" in line)
         sigma_fit = float(sigma_fit.split("sigma:")[1].strip(" }\n"))
@@ -256,7 +335,8 @@ def recovered(named, truth, fit, suite, params):
     ok = True
     for name in named:
         for label, want, got, se in _checks(name, truth, fit, suite):
-            positive_size = name in (NOISE_LEVEL, "bumps", "turn_slip", "per_run_radius")
+            positive_size = (name in (NOISE_LEVEL, "bumps", "turn_slip", "per_run_radius")
+                             or label == f"{GROUP}.sd")
             if se is None:
                 within = False
             elif positive_size:
@@ -299,9 +379,16 @@ def fit_speed_scale(odomcov, directory, report, truth):
             "consistent": after["verdict"] == "consistent", "nees_mean": after["nees_mean"]}
 
 
-def evaluate(odomcov, directory, index, rng, hidden, custom=False):
+def covered(effects):
+    """The effects with E dropped wherever group_variation(E.p) is among them (it adds and fits
+    E itself), sorted."""
+    varied = {group_target(e).split(".")[0] for e in effects if group_target(e)}
+    return sorted(e for e in effects if e not in varied)
+
+
+def evaluate(odomcov, directory, index, rng, hidden, custom=False, grouped=False):
     os.makedirs(directory, exist_ok=True)
-    texts, truth = world_yaml(rng, index, hidden, custom)
+    texts, truth = world_yaml(rng, index, hidden, custom, grouped)
     lab = make_lab(odomcov, directory, texts)
     report = loop(odomcov, lab, os.path.join(directory, "loop"), ROUNDS)
     suite, fit = os.path.join(directory, "loop", "suite.yaml"), report["fit"]
@@ -309,9 +396,11 @@ def evaluate(odomcov, directory, index, rng, hidden, custom=False):
     residuals = [(r["feature"], r["p_value"]) for r in report.get("residuals") or []
                  if r.get("p_value") is not None]
     result = {"world": index, "hidden": sorted(hidden), "named": named,
-              "identified": sorted(named) == sorted(hidden), "recovered": None,
+              "grouped": grouped or any(group_target(h) for h in hidden),
+              "identified": covered(named) == covered(hidden), "recovered": None,
               "consistent": report["compare_after"]["verdict"] == "consistent" if named else None,
-              "explained": report.get("explained"), "residuals": residuals[:3], "params": {}}
+              "explained": report.get("explained"), "residuals": residuals[:3], "params": {},
+              "truth": truth}
     if SPEED_SCALE in hidden:
         # In no catalogue: right when the loop ends unexplained and the residuals point at
         # speed first; recovered and consistent from the custom effect written from that hint.
@@ -322,7 +411,7 @@ def evaluate(odomcov, directory, index, rng, hidden, custom=False):
         result["recovered"] = custom_fit.get("within_3se")
         result["consistent"] = custom_fit.get("consistent")
     elif result["identified"] and named:
-        result["recovered"] = recovered(named, truth, fit, suite, result["params"])
+        result["recovered"] = recovered(covered(named), truth, fit, suite, result["params"])
     return result
 
 
@@ -331,32 +420,43 @@ RANDOM = [e for e in EFFECTS if e not in SYSTEMATIC]
 
 
 def cases(count, rng, kind):
-    """The hidden truths.
-    mixed:  cycling through 16: each catalogue effect alone, a noise level, the speed scale (in
-            no catalogue), two effects (any pair) twice, and none twice;
+    """The hidden truths, [(hidden, grouped)].
+    mixed:  cycling through 19: each catalogue effect alone, each group_variation case, a noise
+            level, the speed scale (in no catalogue), two effects (any pair) twice, and none
+            twice; every world but the speed scale's and the group_variation ones grouped on a
+            coin flip;
     second: cycling through the second catalogue's effects and the speed scale;
+    group:  cycling through the group_variation cases (Eb, Ed, Es);
     ctest:  each effect alone, a noise level, the speed scale, two pairs of one systematic and one
             random effect (a calibration error with a noise source, the usual situation) and two
-            with none;
-    none:   nothing hidden (the false-alarm rate alone)."""
+            with none, none of them grouped (no group_variation worlds yet: see
+            results/diagnose/README.md);
+    none:   nothing hidden (the false-alarm rate alone), half of them grouped (coin flip)."""
+    def coin():
+        return rng.random() < 0.5
     if kind == "none":
-        return [[] for _ in range(count)]
+        return [([], coin()) for _ in range(count)]
     singles = [[e] for e in EFFECTS] + [[NOISE_LEVEL], [SPEED_SCALE]]
     if kind == "ctest":
         pairs = [sorted([rng.choice(SYSTEMATIC), rng.choice(RANDOM)]) for _ in range(2)]
-        return singles + pairs + [[], []]
+        return [(h, False) for h in singles + pairs + [[], []]]
     if kind == "second":
         pool = [[e] for e in SECOND] + [[SPEED_SCALE]]
-        return [pool[i % len(pool)] for i in range(count)]
+        return [(pool[i % len(pool)], False) for i in range(count)]
+    if kind == "group":
+        return [([GROUP_CASES[i % len(GROUP_CASES)]], True) for i in range(count)]
+    singles += [[g] for g in GROUP_CASES]
     out = []
     for i in range(count):
         slot = i % (len(singles) + 4)
         if slot < len(singles):
-            out.append(singles[slot])
+            hidden = singles[slot]
         elif slot < len(singles) + 2:
-            out.append(sorted(rng.sample(EFFECTS, 2)))
+            hidden = sorted(rng.sample(EFFECTS, 2))
         else:
-            out.append([])
+            hidden = []
+        fixed = SPEED_SCALE in hidden or any(group_target(h) for h in hidden)
+        out.append((hidden, bool(group_target(hidden[0])) if fixed else coin()))
     return out
 
 
@@ -366,9 +466,9 @@ def has_custom(odomcov):
     return "--candidates" in done.stdout
 
 
-def category(hidden):
+def category(hidden, grouped=False):
     if not hidden:
-        return "nothing hidden"
+        return "nothing hidden" + (", grouped" if grouped else "")
     if len(hidden) == 1:
         return hidden[0] + (" (in no catalogue)" if hidden[0] == SPEED_SCALE else "")
     kinds = sorted("systematic" if h in SYSTEMATIC else "random" for h in hidden)
@@ -393,9 +493,17 @@ def rates_of(results):
         "false_alarm_rate": rate(sum(bool(r["named"]) for r in without), len(without)),
         "alpha": 0.01,
     }
+    # The group candidates' false alarms: a group_variation named in a grouped world where
+    # nothing varies between groups (whatever else is hidden there).
+    plain_grouped = [r for r in results if r.get("grouped")
+                     and not any(group_target(h) for h in r["hidden"])]
+    rates["grouped_worlds"] = sum(bool(r.get("grouped")) for r in results)
+    rates["grouped_without_group"] = len(plain_grouped)
+    rates["group_false_alarms"] = sum(any(group_target(n) for n in r["named"])
+                                      for r in plain_grouped)
     by_case = {}
     for r in results:
-        c = by_case.setdefault(category(r["hidden"]),
+        c = by_case.setdefault(category(r["hidden"], r.get("grouped")),
                                {"worlds": 0, "identified": 0, "recovered": 0, "consistent": 0})
         c["worlds"] += 1
         c["identified"] += r["identified"]
@@ -413,26 +521,29 @@ def main():
     parser.add_argument("--out", required=True)
     parser.add_argument("--check", action="store_true")
     parser.add_argument("--report", help="write every world's result and the rates as JSON")
-    parser.add_argument("--cases", choices=["mixed", "second", "ctest", "none"], default="mixed",
+    parser.add_argument("--cases", choices=["mixed", "second", "group", "ctest", "none"],
+                        default="mixed",
                         help="mixed: every kind of case in turn; second: the second catalogue "
-                             "and the speed scale; ctest: the blind suite's 16 worlds; none: "
-                             "nothing hidden (the false-alarm rate alone)")
+                             "and the speed scale; group: group_variation of Eb, Ed, Es in turn; "
+                             "ctest: the blind suite's 16 worlds; none: nothing hidden (the "
+                             "false-alarm rate alone)")
     args = parser.parse_args()
 
     rng = random.Random(args.seed)
     custom = has_custom(args.odomcov)
     results = []
     truths = cases(args.worlds, rng, args.cases)
-    for index, hidden in enumerate(truths):
+    for index, (hidden, grouped) in enumerate(truths):
         r = evaluate(args.odomcov, os.path.join(args.out, f"world-{index:03d}"), index,
-                     random.Random(rng.randrange(1 << 62)), hidden, custom)
+                     random.Random(rng.randrange(1 << 62)), hidden, custom, grouped)
         results.append(r)
         status = "ok" if r["identified"] and r["recovered"] is not False else "MISS"
         extra = ""
         if SPEED_SCALE in r["hidden"]:
             extra = (f", explained {r['explained']}, residuals "
                      f"{[(f, float(f'{p:.2g}')) for f, p in r['residuals']]}, custom {r['custom']}")
-        print(f"world {index:3d}: hidden {r['hidden'] or ['nothing']}, named {r['named'] or ['nothing']}"
+        print(f"world {index:3d}{' (grouped)' if r['grouped'] else ''}: hidden "
+              f"{r['hidden'] or ['nothing']}, named {r['named'] or ['nothing']}"
               f", recovered {r['recovered']}, consistent after {r['consistent']}{extra}: {status}",
               flush=True)
 

@@ -393,16 +393,24 @@ def correction_lines(report):
     c = report.get("odometry_correction")
     if not c:
         return []
-    lines = [f"- Corrected odometry: wheelbase {c['wheelbase']:.6g} m, wheel scales left "
-             f"{c['scale_left']:.6g}, right {c['scale_right']:.6g}. End-pose x-y error with the "
-             "runs re-integrated, before → after:",
-             "",
-             "| kind | runs | mean \\|xy\\| [mm] | Emax,sys [mm] |",
-             "|---|---|---|---|"]
+    varies = c.get("motion_dependent", False)
+    head = ("- Corrected odometry: it depends on the motion, so each kind of path has its own "
+            f"effective wheelbase and wheel scales (over all runs: wheelbase {c['wheelbase']:.6g} m"
+            if varies else f"- Corrected odometry: wheelbase {c['wheelbase']:.6g} m")
+    head += (f", wheel scales left {c['scale_left']:.6g}, right {c['scale_right']:.6g}"
+             + (")" if varies else "") + ". End-pose x-y error with the runs re-integrated, "
+             "before → after:")
+    extra = " wheelbase [m] | scale left | scale right |" if varies else ""
+    lines = [head, "",
+             "| kind | runs | mean \\|xy\\| [mm] | Emax,sys [mm] |" + extra,
+             "|---|---|---|---|" + ("---|---|---|" if varies else "")]
     for k in c["by_kind"]:
-        lines.append(f"| {k['kind']} | {k['runs']} | {1e3 * k['mean_xy_before']:.1f} → "
-                     f"{1e3 * k['mean_xy_after']:.1f} | {1e3 * k['emax_sys_before']:.1f} → "
-                     f"{1e3 * k['emax_sys_after']:.1f} |")
+        row = (f"| {k['kind']} | {k['runs']} | {1e3 * k['mean_xy_before']:.1f} → "
+               f"{1e3 * k['mean_xy_after']:.1f} | {1e3 * k['emax_sys_before']:.1f} → "
+               f"{1e3 * k['emax_sys_after']:.1f} |")
+        if varies:
+            row += f" {k['wheelbase']:.6g} | {k['scale_left']:.6g} | {k['scale_right']:.6g} |"
+        lines.append(row)
     return lines
 
 

@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Benchmark of `odomcov diagnose` on blind worlds (issues 7 and 10): the rates over a mixed batch
-# of 112 worlds (7 cycles of: each effect of both catalogues alone, a wrong noise level, a
-# speed-dependent scale that is in no catalogue, two pairs of effects, and two worlds with
-# nothing hidden) and the false-alarm rate over 200 worlds with nothing hidden. Seeds are fixed,
+# of 112 worlds (cycles of 19: each effect of both catalogues alone, a wrong noise level, a
+# speed-dependent scale that is in no catalogue, group_variation of Eb, Ed and Es, two pairs of
+# effects, and two worlds with nothing hidden; about half of the others grouped too) and the
+# false-alarm rate over 200 worlds with nothing hidden (about half grouped), and 60 worlds of
+# group_variation alone (20 each of Eb, Ed, Es varied between groups). Seeds are fixed,
 # so the figures in results/diagnose/ are reproducible. The seeds were fixed after the method was
 # final: the batches used while developing it (seeds 11, 2027, 90210, 31337, 555) are not the
 # ones reported.
-#   scripts/diagnose_rates.sh            # both batches
-#   scripts/diagnose_rates.sh mixed      # one: mixed, none, or pilot (16 worlds, one cycle)
+#   scripts/diagnose_rates.sh            # the three batches
+#   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, or pilot (16 worlds)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
@@ -15,7 +17,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="$root/results/diagnose"
 work="$root/build/diagnose_rates"
 mkdir -p "$out" "$work"
-parts=("${@:-mixed none}")
+parts=("${@:-mixed none group}")
 want() { [[ " ${parts[*]} " == *" $1 "* ]]; }
 run() {  # name seed worlds cases
   rm -rf "${work:?}/$1"
@@ -26,5 +28,6 @@ run() {  # name seed worlds cases
 }
 if want mixed; then run mixed 20261124 112 mixed; fi
 if want none; then run none 24112026 200 none; fi
+if want group; then run group 26112024 60 group; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2

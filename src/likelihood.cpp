@@ -19,21 +19,23 @@ namespace {
 
 constexpr int kDim = 3;
 
-/// group_variation's column for one run: sd times the central difference of the systematic
-/// mean (exact for the perturbed path at any order) in the varied parameter. The step is 1e-6
-/// of the parameter's size (at least 1e-6): truncation O(h^2) and rounding O(eps/h) both stay
-/// near 1e-10 of the column.
+/// group_variation's column for one run: sd times the forward difference of the systematic
+/// mean (exact for the perturbed path at any order) in the varied parameter, from `mean`, the
+/// mean at the parameter's value. A logged run passes its prediction's: on fine pieces
+/// predict_with_order's mean is predict's, bit for bit predict_mean's (on pieces it cannot
+/// coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative). The step is 1e-7
+/// of the parameter's size (at least 1e-7): truncation ~h |mu''/mu'| ~ 1e-7 of the column,
+/// rounding ~eps |mu|/(h |mu'|) far below. One mean-only propagation per run.
 Vector3 group_column(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
-                     const Robot& robot, const EffectList& effects, const GroupTarget& target) {
+                     const Robot& robot, const EffectList& effects, const GroupTarget& target,
+                     const Vector3& mean) {
   if (!target.present || target.sd == 0.0) return Vector3::Zero();
   const double value = effects[target.effect].values[target.parameter];
-  const double h = 1e-6 * std::max(1.0, std::abs(value));
+  const double h = 1e-7 * std::max(1.0, std::abs(value));
   EffectList shifted = effects;
   shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict(pieces, durations, robot, shifted).mean;
-  shifted[target.effect].values[target.parameter] = value - h;
-  const Vector3 down = predict(pieces, durations, robot, shifted).mean;
-  return target.sd * (up - down) / (2.0 * h);
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted);
+  return target.sd * (up - mean) / h;
 }
 
 }  // namespace
@@ -89,14 +91,17 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
           predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
       out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean,
                    p.cov + meas,
-                   group_column(run.pieces, run.durations_s, model.robot, model.effects, target),
+                   group_column(run.pieces, run.durations_s, model.robot, model.effects, target, p.mean),
                    group};
       return;
     }
     std::vector<double> durations;
     const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
     const Prediction p = predict_with_order(pieces, durations, model.robot, model.effects, model.order);
-    const Vector3 column = group_column(pieces, durations, model.robot, model.effects, target);
+    const Vector3 column =
+        group_column(pieces, durations, model.robot, model.effects, target,
+                     target.present ? predict_mean(pieces, durations, model.robot, model.effects)
+                                    : Vector3::Zero());
     const Vector3 odometry = sampled_end_pose(ex.path, B);
     for (std::size_t i = 0; i < ex.runs.size(); ++i) {
       out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean, p.cov + meas,

@@ -19,7 +19,7 @@ namespace odomcov {
 ///   e_i = mean_i + group_column_i z_g + w_i,   w_i ~ N(0, cov_i) independent,
 /// so a group's runs have the joint covariance blockdiag(cov_i) + U U^T, U the stacked columns
 /// (rank one). group_column is sd times the first-order sensitivity of the run's predicted mean
-/// to the varied parameter (central differences of the systematic mean); it is zero without
+/// to the varied parameter (a forward difference of the systematic mean); it is zero without
 /// group_variation, and then the runs are independent.
 struct RunResidual {
   Vector3 error = Vector3::Zero();
