@@ -25,41 +25,13 @@ namespace {
 
 using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
-/// [{"wheel_diameter_ratio": {"Ed": 1.004}}, ...] -> EffectList, validated like a config's.
+/// [{"wheel_diameter_ratio": {"Ed": 1.004}}, {"custom": {...}}, ...] -> EffectList: written as
+/// JSON (a subset of YAML) and read by the configs' own parser, so catalogue, group_variation
+/// and custom effects take the same checks and give the same errors (as ValueError).
 EffectList effects_from_python(const py::object& obj) {
-  EffectList list;
-  if (obj.is_none()) return list;
-  for (const py::handle item : obj) {
-    const py::dict entry = py::reinterpret_borrow<py::dict>(item);
-    if (entry.size() != 1) throw py::value_error("an effect is a one-key dict {name: {parameter: value}}");
-    for (const auto& [key, value] : entry) {
-      const std::string name = py::str(key);
-      const EffectInfo* info = find_effect(name);
-      if (!info) throw py::value_error("unknown effect '" + name + "'");
-      const py::dict params = py::reinterpret_borrow<py::dict>(value);
-      EffectSpec spec{name, {}};
-      if (info->grouped) {  // group_variation: {"parameter": "wheelbase_error.Eb", "sd": ...}
-        if (!params.contains("parameter")) throw py::value_error(name + ".parameter: missing parameter");
-        spec.target = py::str(params["parameter"]);
-      }
-      for (const EffectParameterInfo& p : info->parameters) {
-        if (!params.contains(p.name.c_str())) {
-          throw py::value_error(name + "." + p.name + ": missing parameter");
-        }
-        spec.values.push_back(params[p.name.c_str()].cast<double>());
-      }
-      if (params.size() != info->parameters.size() + (info->grouped ? 1 : 0)) {
-        throw py::value_error(name + ": unknown parameter");
-      }
-      const std::string problem = check_effect(spec);
-      if (!problem.empty()) throw py::value_error(name + ": " + problem);
-      list.push_back(spec);
-    }
-  }
-  if (const std::string problem = check_group_target(list); !problem.empty()) {
-    throw py::value_error(std::string(kGroupVariation) + ": " + problem);
-  }
-  return list;
+  if (obj.is_none()) return {};
+  const std::string text = py::str(py::module_::import("json").attr("dumps")(obj));
+  return parse_effect_list(text, "effects");
 }
 
 /// N x 3 x 3 array from a list of matrices.
@@ -330,8 +302,8 @@ PYBIND11_MODULE(_odomcov, m) {
         R"(Pose and first-order covariance along an encoder log.
 
 left, right: cumulative wheel travel [m] per sample, arrays of length N starting at 0.
-wheelbase [m], k_left, k_right [m^(1/2)]: the robot. effects: optional model effects,
-[{"wheel_diameter_ratio": {"Ed": 1.004}}, ...].
+wheelbase [m], k_left, k_right [m^(1/2)]: the robot. effects: optional model effects, as a
+config's effects list: [{"wheel_diameter_ratio": {"Ed": 1.004}}, {"custom": {...}}, ...].
 Returns {"pose": (N, 3) odometry poses (x, y, theta) in the start frame, "cov": (N, 3, 3)
 covariance of the error true - odometry in the start (world) frame, "mean": (N, 3) the
 effects' systematic mean error}. Without effects this is the closed form [Kleeman95] per

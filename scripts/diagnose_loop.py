@@ -346,6 +346,12 @@ def loop(odomcov, suite, out, rounds, candidates=None, order=None):
     return report
 
 
+def plus_minus(value, stderr, digits=6):
+    """value ± its standard error, or "(not identified)" when the fit has none (a singular
+    information matrix: two effects the data cannot tell apart)."""
+    return f"{value:.{digits}g} ± " + (f"{stderr:.2g}" if stderr is not None else "(not identified)")
+
+
 def _yes_no(flag):
     return "" if flag is None else ("yes" if flag else "no")
 
@@ -387,16 +393,24 @@ def correction_lines(report):
     c = report.get("odometry_correction")
     if not c:
         return []
-    lines = [f"- Corrected odometry: wheelbase {c['wheelbase']:.6g} m, wheel scales left "
-             f"{c['scale_left']:.6g}, right {c['scale_right']:.6g}. End-pose x-y error with the "
-             "runs re-integrated, before → after:",
-             "",
-             "| kind | runs | mean \\|xy\\| [mm] | Emax,sys [mm] |",
-             "|---|---|---|---|"]
+    varies = c.get("motion_dependent", False)
+    head = ("- Corrected odometry: it depends on the motion, so each kind of path has its own "
+            f"effective wheelbase and wheel scales (over all runs: wheelbase {c['wheelbase']:.6g} m"
+            if varies else f"- Corrected odometry: wheelbase {c['wheelbase']:.6g} m")
+    head += (f", wheel scales left {c['scale_left']:.6g}, right {c['scale_right']:.6g}"
+             + (")" if varies else "") + ". End-pose x-y error with the runs re-integrated, "
+             "before → after:")
+    extra = " wheelbase [m] | scale left | scale right |" if varies else ""
+    lines = [head, "",
+             "| kind | runs | mean \\|xy\\| [mm] | Emax,sys [mm] |" + extra,
+             "|---|---|---|---|" + ("---|---|---|" if varies else "")]
     for k in c["by_kind"]:
-        lines.append(f"| {k['kind']} | {k['runs']} | {1e3 * k['mean_xy_before']:.1f} → "
-                     f"{1e3 * k['mean_xy_after']:.1f} | {1e3 * k['emax_sys_before']:.1f} → "
-                     f"{1e3 * k['emax_sys_after']:.1f} |")
+        row = (f"| {k['kind']} | {k['runs']} | {1e3 * k['mean_xy_before']:.1f} → "
+               f"{1e3 * k['mean_xy_after']:.1f} | {1e3 * k['emax_sys_before']:.1f} → "
+               f"{1e3 * k['emax_sys_after']:.1f} |")
+        if varies:
+            row += f" {k['wheelbase']:.6g} | {k['scale_left']:.6g} | {k['scale_right']:.6g} |"
+        lines.append(row)
     return lines
 
 
@@ -482,9 +496,10 @@ def markdown(report):
     rows.append(f"- `compare` with the loop's model: {summary(report['compare_after'])}.")
     fit = report["fit"]
     if fit:
-        values = ", ".join(f"{k} = {v:.6g} ± {fit['stderr'][k]:.2g}"
+        values = ", ".join(f"{k} = {plus_minus(v, fit['stderr'][k])}"
                            for k, v in fit["parameters"].items())
         rows.append(f"- Joint fit of everything named, full likelihood: {values}.")
+        rows.extend(f"- The joint fit warns: {w}." for w in fit.get("warnings", []))
         rows.append(f"- `compare` with the joint fit: {summary(report['compare_fit'])}.")
     elif report.get("fit_error"):
         rows.append(f"- The joint fit failed: {report['fit_error']}")

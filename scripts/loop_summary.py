@@ -8,6 +8,8 @@ Usage: loop_summary.py NAME=LOOP.json [NAME=LOOP.json ...] > summary.md
 import json
 import sys
 
+from diagnose_loop import plus_minus
+
 
 def model(report):
     """The final model's compare summary: the joint fit's, else the loop's."""
@@ -22,12 +24,12 @@ def held_model(report):
 def sizes(report):
     fit = report.get("fit")
     if not fit:  # a loop stopped before its joint fit: each effect as diagnose sized it
-        return "; ".join(", ".join(f"{s['named']}.{k} = {v:.5g} ± {s['stderr'][k]:.2g}"
+        return "; ".join(", ".join(f"{s['named']}.{k} = {plus_minus(v, s['stderr'][k], 5)}"
                                    for k, v in s["parameters"].items())
                          for s in report["rounds"] if s["named"]) + \
             " (no joint fit: as diagnose named them)" if any(s["named"] for s in report["rounds"]) \
             else "nothing"
-    return ", ".join(f"{k} = {v:.5g} ± {fit['stderr'][k]:.2g}" for k, v in fit["parameters"].items())
+    return ", ".join(f"{k} = {plus_minus(v, fit['stderr'][k], 5)}" for k, v in fit["parameters"].items())
 
 
 def cells(summary, types, field):

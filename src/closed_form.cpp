@@ -3,14 +3,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include "arc_functions.hpp"
 #include "series.hpp"
 
 namespace odomcov {
 namespace {
-
-using series::a4;
-using series::sinc;
-using series::u3;
 
 /// The integrals of Psi(v) entries over v in [0, 1] that build Q_tan, with
 /// a(v) = d(1 - cos av)/a, b(v) = d sin(av)/a, c(v) = cos av, s(v) = sin av.
@@ -29,14 +26,13 @@ struct ArcIntegrals {
   double a, b, aa, bb, ab;        // per power of d already applied
   double ac, as, bc, bs;
 
-  ArcIntegrals(double d, double angle) {
-    const double x = angle;
-    const double sinc1 = sinc(x);
-    const double sinc2 = sinc(2.0 * x);
-    const double sinc_half = sinc(0.5 * x);
-    const double sinc_half2 = sinc_half * sinc_half;
-    const double u3_1 = u3(x);
-    const double u3_2 = u3(2.0 * x);
+  ArcIntegrals(double d, const detail::ArcFunctions& f) {
+    const double x = f.angle;
+    const double sinc1 = f.sinc1;
+    const double sinc2 = f.sinc2;
+    const double sinc_half2 = f.sinc_half * f.sinc_half;
+    const double u3_1 = f.u3_1;
+    const double u3_2 = f.u3_2;
     c = sinc1;
     s = 0.5 * x * sinc_half2;
     cc = 0.5 * (1.0 + sinc2);
@@ -44,7 +40,7 @@ struct ArcIntegrals {
     cs = 0.5 * x * sinc1 * sinc1;
     a = d * x * u3_1;
     b = 0.5 * d * sinc_half2;
-    aa = d * d * x * x * a4(x);
+    aa = d * d * x * x * f.a4_1;
     bb = 2.0 * d * d * u3_2;
     ab = d * d * 0.125 * x * sinc_half2 * sinc_half2;
     ac = d * x * (2.0 * u3_2 - u3_1);
@@ -56,23 +52,32 @@ struct ArcIntegrals {
 
 }  // namespace
 
+namespace detail {
+
+Vector3 arc_displacement(double center_m, const ArcStep& f) {
+  return {f.chord_x(center_m), f.chord_y(center_m), f.angle};
+}
+
+Matrix3 arc_transition(double center_m, const ArcStep& f) {
+  const double c = f.cos1;
+  const double s = f.sin1;
+  // Third column: how far the end point moves, in the end frame, per unit start heading error:
+  // (R(1 - cos a), R sin a) = (d a sinc^2(a/2)/2, d sinc a) = (chord y, chord x).
+  Matrix3 phi;
+  phi << c, s, f.chord_y(center_m),  //
+      -s, c, f.chord_x(center_m),    //
+      0.0, 0.0, 1.0;
+  return phi;
+}
+
+}  // namespace detail
+
 Vector3 arc_displacement(double center_m, double angle_rad) {
-  const double sinc_half = sinc(0.5 * angle_rad);
-  return {center_m * sinc(angle_rad), 0.5 * center_m * angle_rad * sinc_half * sinc_half,
-          angle_rad};
+  return detail::arc_displacement(center_m, detail::ArcStep(angle_rad));
 }
 
 Matrix3 arc_transition(double center_m, double angle_rad) {
-  const double c = std::cos(angle_rad);
-  const double s = std::sin(angle_rad);
-  // Third column: how far the end point moves, in the end frame, per unit start heading error:
-  // (R(1 - cos a), R sin a) = (d a sinc^2(a/2)/2, d sinc a) = (chord y, chord x).
-  const Vector3 chord = arc_displacement(center_m, angle_rad);
-  Matrix3 phi;
-  phi << c, s, chord.y(),  //
-      -s, c, chord.x(),    //
-      0.0, 0.0, 1.0;
-  return phi;
+  return detail::arc_transition(center_m, detail::ArcStep(angle_rad));
 }
 
 Eigen::Vector2d wheel_variances(const ArcSegment& seg, const WheelNoise& k) {
@@ -90,8 +95,10 @@ Matrix2 wheel_noise_intensity(const ArcSegment& seg, double wheelbase_m, const W
   return n;
 }
 
-Matrix3 arc_noise_covariance(double center_m, double angle_rad, const Matrix2& intensity) {
-  const ArcIntegrals I(center_m, angle_rad);
+namespace detail {
+
+Matrix3 arc_noise_covariance(double center_m, const ArcFunctions& f, const Matrix2& intensity) {
+  const ArcIntegrals I(center_m, f);
   const double q11 = intensity(0, 0);
   const double q12 = 0.5 * (intensity(0, 1) + intensity(1, 0));
   const double q22 = intensity(1, 1);
@@ -108,11 +115,21 @@ Matrix3 arc_noise_covariance(double center_m, double angle_rad, const Matrix2& i
   return q;
 }
 
-Matrix32 arc_input_gain(double center_m, double angle_rad) {
-  const ArcIntegrals I(center_m, angle_rad);
+Matrix32 arc_input_gain(double center_m, const ArcFunctions& f) {
+  const ArcIntegrals I(center_m, f);
   Matrix32 g;
   g << I.a, I.c, I.b, -I.s, 1.0, 0.0;
   return g;
+}
+
+}  // namespace detail
+
+Matrix3 arc_noise_covariance(double center_m, double angle_rad, const Matrix2& intensity) {
+  return detail::arc_noise_covariance(center_m, detail::ArcFunctions(angle_rad), intensity);
+}
+
+Matrix32 arc_input_gain(double center_m, double angle_rad) {
+  return detail::arc_input_gain(center_m, detail::ArcFunctions(angle_rad));
 }
 
 Matrix3 arc_covariance(const ArcSegment& seg, double wheelbase_m, const WheelNoise& k) {

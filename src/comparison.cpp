@@ -170,10 +170,14 @@ double ExperimentComparison::predicted_correlation(int a, int b) const {
 }
 
 Comparison compare(const Suite& suite, const SuiteModel& model, double alpha) {
+  return compare(suite, model, alpha, residuals(suite, model));
+}
+
+Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
+                   const std::vector<std::vector<RunResidual>>& grouped) {
   Comparison out;
   out.alpha = alpha;
   out.alpha_per_test = alpha / static_cast<double>(2 * suite.experiments.size() + 1);
-  const auto grouped = residuals(suite, model);
   const auto res = condition_on_groups(grouped);
   const auto own = marginal(grouped);
   // Mardia's multivariate kurtosis [Mardia70] as a test of shape only: each experiment's

@@ -341,12 +341,19 @@ Config parse_config_unguarded(const YAML::Node& root, const std::string& file) {
   return config;
 }
 
+namespace {
+EffectList effect_list(const YAML::Node& root, const std::string& source, const std::string& key) {
+  if (!root.IsSequence()) yaml::fail({source, key}, root, "expected a list of effects, e.g. - custom: {name: ..., ...}");
+  return parse_effects(root, source, key);
+}
+}  // namespace
+
 EffectList load_effects(const std::string& file) {
-  return yaml::guarded(file, [&] {
-    const YAML::Node root = yaml::load_file(file);
-    if (!root.IsSequence()) yaml::fail({file, ""}, root, "expected a list of effects, e.g. - custom: {name: ..., ...}");
-    return parse_effects(root, file, "");
-  });
+  return yaml::guarded(file, [&] { return effect_list(yaml::load_file(file), file, ""); });
+}
+
+EffectList parse_effect_list(const std::string& text, const std::string& source) {
+  return yaml::guarded(source, [&] { return effect_list(yaml::load_text(text, source), source, source); });
 }
 
 Config load_config(const std::string& file) { return parse_config(yaml::load_file(file), file); }

@@ -255,7 +255,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   Diagnosis d;
   d.alpha = alpha;
   d.runs = run_count(suite);
-  const Comparison before = compare(suite, model, alpha);
+  const Comparison before = compare(suite, model, alpha, cache.at(model));
   d.before = summarise(before);
   d.kurtosis = before.kurtosis;
   d.heavy_tails = d.kurtosis.valid && d.kurtosis.statistic > 0 && d.kurtosis.p_value < alpha;
@@ -354,7 +354,9 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
     }
   }
   if (progress) progress->fits_done = progress->fits_total.load();
-  d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, alpha)) : d.before;
+  d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, alpha,
+                                       cache.at(d.candidates[*d.best].model)))
+                   : d.before;
   d.explained = d.after.verdict == "consistent";
   d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
   if (!d.explained) {

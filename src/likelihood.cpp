@@ -40,11 +40,11 @@ GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<
   const EffectParameterInfo& p = info_of(effects[target.effect])->parameters[target.parameter];
   const double h = std::min({std::sqrt(3.0) * target.sd, 0.5 * (value - p.lower), 0.5 * (p.upper - value)});
   EffectList shifted = effects;
-  const Vector3 mid = predict(pieces, durations, robot, shifted).mean;
+  const Vector3 mid = predict_mean(pieces, durations, robot, shifted);
   shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict(pieces, durations, robot, shifted).mean;
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted);
   shifted[target.effect].values[target.parameter] = value - h;
-  const Vector3 down = predict(pieces, durations, robot, shifted).mean;
+  const Vector3 down = predict_mean(pieces, durations, robot, shifted);
   const double sd2_h2 = target.sd * target.sd / (h * h);  // 1/3 unless h is cut by a bound
   const Vector3 curvature = up + down - 2.0 * mid;        // h^2 f''
   return {0.5 * sd2_h2 * curvature, target.sd * (up - down) / (2.0 * h),

@@ -13,5 +13,10 @@ namespace odomcov::detail {
 /// intensity n_td.
 std::complex<double> noise_mean_of_piece(std::complex<double> rotation, double d, double a,
                                          double v0, double dv, double n_td);
+/// The same with U = int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2) given (the engine has
+/// the sines already).
+std::complex<double> noise_mean_of_piece(std::complex<double> rotation, double d, double a,
+                                         std::complex<double> undamped, double v0, double dv,
+                                         double n_td);
 
 }  // namespace odomcov::detail

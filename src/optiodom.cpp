@@ -22,7 +22,7 @@ namespace fs = std::filesystem;
 
 /// A run whose total encoder heading change is below this is a straight run.
 constexpr double kStraightBelowRad = 0.5;
-/// Sessions started before this hour belong to the previous evening's recording session.
+/// Sessions started before this hour belong to the previous evening's recording day.
 constexpr int kSessionDayStartsHour = 6;
 
 struct Metadata {
@@ -63,11 +63,10 @@ Metadata read_metadata(const fs::path& dir) {
   return m;
 }
 
-/// The recording session of a session directory named DDMMYYYYhhmm (its start time): the
-/// evening it belongs to, as YYYY-MM-DD, a session started before 06:00 belonging to the
-/// evening before (the December and January recordings run past midnight). Any other name is
-/// its own session.
-std::string recording_session(const std::string& name) {
+/// The recording day of a session directory named DDMMYYYYhhmm (its start time): the evening
+/// it belongs to, as YYYY-MM-DD, a session started before 06:00 belonging to the evening before
+/// (the December and January recordings run past midnight). Any other name is its own day.
+std::string recording_day(const std::string& name) {
   if (name.size() != 12 || name.find_first_not_of("0123456789") != std::string::npos) return name;
   std::tm tm{};
   tm.tm_mday = std::stoi(name.substr(0, 2));
@@ -119,7 +118,7 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
 
   std::vector<ImportedFile> files;
   std::map<std::string, std::vector<std::string>> experiments;  // name -> log paths
-  std::map<std::string, std::string> groups;                     // name -> recording session
+  std::map<std::string, std::string> groups;                     // name -> session or day
   std::map<std::string, ImportSummary> sums;
   for (const std::string& s : options.sessions) {
     const fs::path dir = fs::path(s).lexically_normal();
@@ -185,7 +184,7 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
       const std::string rel = type + "/" + session + "/" + stem.substr(session.size() + 1) + ".csv";
       files.push_back({rel, log});
       experiments[experiment].push_back(rel);
-      groups[experiment] = recording_session(session);
+      groups[experiment] = options.group == OptiOdomGroup::day ? recording_day(session) : session;
       ImportSummary& sum = sums[experiment];
       sum.experiment = experiment;
       sum.runs += 1;

@@ -69,7 +69,9 @@
 #include <complex>
 
 #include "effects/effect.hpp"
+#include "arc_functions.hpp"
 #include "quadrature.hpp"
+#include "series.hpp"
 
 namespace odomcov {
 namespace {
@@ -80,6 +82,7 @@ constexpr int kQ = kSecondOrderNodes;
 /// One resolved piece in the form the integrals use.
 struct Piece {
   double heading0 = 0.0;  // theta_bar at the piece start
+  Complex rotation0 = 1.0;  // exp(i heading0)
   double a = 0.0;         // true heading change
   double d = 0.0;         // true centre travel (per unit t)
   double w0 = 0.0;        // W at the piece start
@@ -126,7 +129,7 @@ void make_node(const Model& model, std::size_t k, double u, double weight, doubl
   const double* g0 = model.g_start.data() + k * static_cast<std::size_t>(m);
   const double* gt = model.g_theta.data() + k * static_cast<std::size_t>(m);
   for (int i = 0; i < m; ++i) g_buffer[i] = g0[i] + gt[i] * u;
-  node.A = std::polar(1.0, p.heading0 + p.a * u);
+  node.A = detail::times(p.rotation0, detail::unit_complex(p.a * u));
   node.d = p.d;
   node.W = p.w0 + p.i_tt * u;
   node.V = node.W + dot(g_buffer, g_buffer, m);
@@ -136,8 +139,8 @@ void make_node(const Model& model, std::size_t k, double u, double weight, doubl
   node.g_gd = dot(g_buffer, node.gd, m);
   node.m = 0.5 * p.i_td + node.g_gd;
   node.weight = weight;
-  node.half_damping = std::exp(-0.5 * node.V);
-  node.expm1_W = std::expm1(node.W);
+  node.half_damping = 1.0 + series::expm1_small(-0.5 * node.V);
+  node.expm1_W = series::expm1_small(node.W);
 }
 
 /// Adds the integrands of (3) and (4) for one pair s < t, times `weight`.
@@ -167,8 +170,8 @@ inline void add_pair(const Node& s, const Node& t, int m, double weight, Complex
                            t.d * (-s.i_td - gt_gds) + imag_common);
   const Complex diff_plus(gds_gdt - lambda_s * lambda_t + s.m * t.m,
                           t.d * (s.i_td + gt_gds) + imag_common);
-  sum_conj += s.A * std::conj(t.A) * (e * (em * x_minus + diff_minus));
-  sum_plain += s.A * t.A * (e * (em_minus * x_plus + diff_plus));
+  sum_conj += detail::times(detail::times(s.A, std::conj(t.A)), e * (em * x_minus + diff_minus));
+  sum_plain += detail::times(detail::times(s.A, t.A), e * (em_minus * x_plus + diff_plus));
 }
 
 /// add_pair summed over every pair of nodes in different pieces (s in the earlier one), when
@@ -186,17 +189,17 @@ void add_separable_pairs(const std::vector<Node>& nodes, Complex& sum_conj, Comp
     for (std::size_t b = first; b < first + kQ; ++b) {
       const Node& t = nodes[b];
       const double et = t.weight * t.half_damping;
-      sum_conj += std::conj(t.A) * et * (t.d * S1 + 0.5 * t.i_td * S2);
-      sum_plain += t.A * et * (t.d * T1 + 0.5 * t.i_td * T2);
+      sum_conj += detail::times(std::conj(t.A) * et, t.d * S1 + 0.5 * t.i_td * S2);
+      sum_plain += detail::times(t.A * et, t.d * T1 + 0.5 * t.i_td * T2);
     }
     for (std::size_t a = first; a < first + kQ; ++a) {
       const Node& s = nodes[a];
       const Complex p = s.A * (s.weight * s.half_damping);
       const double em = s.expm1_W, emm = -em / (1.0 + em), is = s.i_td;
-      S1 += p * Complex(em * s.d, -0.5 * em * is - is);
-      S2 += p * Complex(-0.5 * em * is - is, -em * s.d);
-      T1 += p * Complex(emm * s.d, 1.5 * emm * is + is);
-      T2 += p * Complex(-1.5 * emm * is - is, emm * s.d);
+      S1 += detail::times(p, Complex(em * s.d, -0.5 * em * is - is));
+      S2 += detail::times(p, Complex(-0.5 * em * is - is, -em * s.d));
+      T1 += detail::times(p, Complex(emm * s.d, 1.5 * emm * is + is));
+      T2 += detail::times(p, Complex(-1.5 * emm * is - is, emm * s.d));
     }
   }
 }
@@ -287,6 +290,7 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
     const effects::ResolvedPiece& r = resolved.pieces[k];
     Piece& p = model.pieces[k];
     p.heading0 = true_pose.z();
+    p.rotation0 = std::polar(1.0, p.heading0);
     p.a = r.angle_rad;
     p.d = r.center_m;
     p.w0 = w;
@@ -322,14 +326,14 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
       const Node& x = nodes[n];
       // (2)
       noise_mean += x.weight * x.A *
-                    (std::expm1(-0.5 * x.V) * Complex(x.d, x.m) + Complex(0.0, x.m));
+                    (series::expm1_small(-0.5 * x.V) * Complex(x.d, x.m) + Complex(0.0, x.m));
       // (5)
       const double c_end = x.W + dot(g_end, x.g, m);
-      cov_p_theta += x.weight * x.A * std::exp(-0.5 * x.V) *
+      cov_p_theta += x.weight * x.A * x.half_damping *
                      Complex(model.pieces[k].i_td + dot(g_end, x.gd, m) - c_end * x.m,
                              x.d * c_end);
       // single integral of (4)
-      diag_plain += x.weight * x.A * x.A * std::exp(-2.0 * x.V) * model.pieces[k].i_dd;
+      diag_plain += x.weight * x.A * x.A * (1.0 + series::expm1_small(-2.0 * x.V)) * model.pieces[k].i_dd;
     }
   }
 

@@ -89,4 +89,14 @@ inline double a4(double x) {
   return sum;
 }
 
+/// expm1(x); below kExpm1SeriesBelow in size (heading variances along a run) its Taylor series
+/// through x^5, whose first term left out, x^6/720, is below 1.4e-18 of x; libm above.
+inline constexpr double kExpm1SeriesBelow = 1e-3;
+inline double expm1_small(double x) {
+  if (std::abs(x) < kExpm1SeriesBelow) {
+    return x * (1.0 + x * (1.0 / 2.0 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (1.0 / 120.0)))));
+  }
+  return std::expm1(x);
+}
+
 }  // namespace odomcov::series

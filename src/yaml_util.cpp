@@ -55,16 +55,23 @@ void check_tree(const Where& where, const YAML::Node& node,
 }  // namespace
 
 YAML::Node load_file(const std::string& path) {
-  const std::string text = read_input_file(path, kMaxYamlBytes, "YAML file");
+  return load_text(read_input_file(path, kMaxYamlBytes, "YAML file"), path);
+}
+
+YAML::Node load_text(const std::string& text, const std::string& source) {
+  if (text.size() > kMaxYamlBytes) {
+    throw InputError(source, 0, "", "YAML text of " + std::to_string(text.size()) + " bytes, above the limit of " +
+                                        std::to_string(kMaxYamlBytes));
+  }
   YAML::Node root;
   try {
     root = YAML::Load(text);
   } catch (const YAML::Exception& e) {
-    throw InputError(path, e.mark.line >= 0 ? e.mark.line + 1 : 0, "", "malformed YAML: " + e.msg);
+    throw InputError(source, e.mark.line >= 0 ? e.mark.line + 1 : 0, "", "malformed YAML: " + e.msg);
   }
-  if (!root.IsDefined() || root.IsNull()) throw InputError(path, 0, "", "file is empty");
+  if (!root.IsDefined() || root.IsNull()) throw InputError(source, 0, "", "file is empty");
   std::set<std::pair<int, int>> visited;
-  check_tree({path, ""}, root, visited);
+  check_tree({source, ""}, root, visited);
   return root;
 }
 

@@ -25,6 +25,8 @@ struct Where {
 /// YAML, a key that is not a plain scalar (`? [1]: 2`, `? :`) and a key given twice in one map
 /// are InputErrors naming the file, the line and the dotted key.
 YAML::Node load_file(const std::string& path);
+/// The same checks on YAML (or JSON, its subset) text; `source` names it in errors.
+YAML::Node load_text(const std::string& text, const std::string& source);
 
 /// Turns a yaml-cpp exception into an InputError with the file and the node's line.
 [[noreturn]] void translate_yaml_exception(const std::string& file, const YAML::Exception& e);

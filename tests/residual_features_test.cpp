@@ -134,31 +134,76 @@ TEST(Verdict, WordsNeverSayExplainedWhenNot) {
   }
 }
 
+/// The lab's runs moved to where the model's systematic effects take the robot (no noise), on
+/// the encoders' sample arcs (what the simulator drives, and what the correction re-integrates).
+Suite noise_free(Suite s, const SuiteModel& model) {
+  for (SuiteExperiment& ex : s.experiments) {
+    std::vector<double> durations;
+    for (const SampleRun& r : sample_schedule(ex.path)) durations.push_back(static_cast<double>(r.count) * r.duration_s);
+    const Vector3 truth = predict(sample_arcs(ex.path), durations, s.robot, model.effects).true_end_pose;
+    for (SuiteRun& r : ex.runs) r.measured = truth;
+  }
+  return s;
+}
+
 // Runs that land exactly where the perturbed robot goes (no noise): the corrected odometry must
 // reproduce them to rounding, and the nominal odometry must not.
 TEST(OdometryCorrection, NoiseFreeRunsAreReproducedByTheCorrectedOdometry) {
-  Suite s = lab({kSource + "/configs/worlds/standard.yaml"});
-  SuiteModel model = suite_model(s);
-  EXPECT_FALSE(odometry_correction(s, model).has_value());
+  const Suite plain = lab({kSource + "/configs/worlds/standard.yaml"});
+  SuiteModel model = suite_model(plain);
+  EXPECT_FALSE(odometry_correction(plain, model).has_value());
+  model.effects = {{"reference_offset", {0.01, 0.0}}};  // moves the reference, not the odometry
+  EXPECT_FALSE(odometry_correction(plain, model).has_value());
   model.effects = {{"wheel_diameter_ratio", {1.003}}, {"wheelbase_error", {1.01}}, {"scale_error", {0.998}}};
-  for (SuiteExperiment& ex : s.experiments) {
-    const Vector3 truth = predict(model_pieces(ex.path, s.robot.wheelbase_m), s.robot, model.effects).true_end_pose;
-    for (SuiteRun& r : ex.runs) r.measured = truth;
-  }
+  const Suite s = noise_free(plain, model);
   const auto c = odometry_correction(s, model);
   ASSERT_TRUE(c.has_value());
-  EXPECT_NEAR(c->wheelbase_m, 1.01 * 0.4, 1e-15);
-  EXPECT_NEAR(c->scale_left, 0.998 * 2 / 2.003, 1e-15);
-  EXPECT_NEAR(c->scale_right, 0.998 * 2 * 1.003 / 2.003, 1e-15);
+  // Constant factors: every kind gets the same values, [Chong97] eq. 11 times Es. They are
+  // ratios of sums over ~1e4 pieces, so equal to the closed form to ~1e4 roundings.
+  EXPECT_FALSE(c->motion_dependent);
+  EXPECT_NEAR(c->parameters.wheelbase_m, 1.01 * 0.4, 1e-12);
+  EXPECT_NEAR(c->parameters.scale_left, 0.998 * 2 / 2.003, 1e-12);
+  EXPECT_NEAR(c->parameters.scale_right, 0.998 * 2 * 1.003 / 2.003, 1e-12);
   for (const CorrectionByKind& k : c->by_kind) {
-    // The squares' samples that straddle a line-turn keyframe are one arc to the odometry but
-    // two to the keyframe truth used here: a difference of order (sample travel) x (turn per
-    // sample) per corner, 4e-5 m over the square (6 mm samples, 90 deg turns); elsewhere exact.
-    const double tolerance = k.kind == "umbmark" ? 1e-4 : 1e-9;
-    EXPECT_LT(k.mean_xy_after_m, tolerance) << k.kind;
-    EXPECT_LT(k.emax_after_m, tolerance) << k.kind;
+    EXPECT_LT(k.mean_xy_after_m, 1e-9) << k.kind;
+    EXPECT_LT(k.emax_after_m, 1e-9) << k.kind;
     // Forward-back returns to the start under any scale (no before error); spins barely move.
     if (k.kind != "spin" && k.kind != "forward") EXPECT_GT(k.emax_before_m, 1e-2) << k.kind;
+  }
+}
+
+// A correction that depends on the motion (turn_dependent_wheelbase): the re-integration applies
+// it piece by piece, so noise-free runs are reproduced on every kind of path, and each kind
+// reports the wheelbase its own turns see: B Eb_spin on the spins (spin fraction 1), B Eb_arc on
+// the lines (spin fraction 0, where nothing turns and the plain mean applies), in between on
+// the arcs.
+TEST(OdometryCorrection, AMotionDependentWheelbaseIsReportedPerKindOfPath) {
+  const Suite plain = lab({kSource + "/configs/worlds/standard.yaml"});
+  SuiteModel model = suite_model(plain);
+  const double B = plain.robot.wheelbase_m, arc = 1.005, spin = 1.02;
+  model.effects = {{"turn_dependent_wheelbase", {arc, spin}}, {"scale_error", {0.998}}};
+  const Suite s = noise_free(plain, model);
+  const auto c = odometry_correction(s, model);
+  ASSERT_TRUE(c.has_value());
+  EXPECT_TRUE(c->motion_dependent);
+  for (const CorrectionByKind& k : c->by_kind) {
+    EXPECT_LT(k.mean_xy_after_m, 1e-9) << k.kind;
+    EXPECT_NEAR(k.parameters.scale_left, 0.998, 1e-12) << k.kind;
+    EXPECT_NEAR(k.parameters.scale_right, 0.998, 1e-12) << k.kind;
+    if (k.kind == "spin") EXPECT_NEAR(k.parameters.wheelbase_m, spin * B, 1e-12);
+    if (k.kind == "line") EXPECT_NEAR(k.parameters.wheelbase_m, arc * B, 1e-12);
+    if (k.kind == "arc") {
+      EXPECT_GT(k.parameters.wheelbase_m, arc * B);
+      EXPECT_LT(k.parameters.wheelbase_m, spin * B);
+    }
+  }
+  // A single wheelbase (the all-runs value, which the spins dominate) misses the arcs.
+  SuiteModel constant = model;
+  constant.effects = {{"wheelbase_error", {c->parameters.wheelbase_m / B}}, {"scale_error", {0.998}}};
+  const auto single = odometry_correction(s, constant);
+  ASSERT_TRUE(single.has_value());
+  for (const CorrectionByKind& k : single->by_kind) {
+    if (k.kind == "arc") EXPECT_GT(k.mean_xy_after_m, 1e-3) << k.kind;
   }
 }
 

@@ -7,7 +7,9 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <map>
 
 #include "odomcov/error.hpp"
 #include "odomcov/optiodom.hpp"
@@ -82,6 +84,41 @@ TEST(OptiOdom, ImportsTicksAsMetresAndGroupsByDirection) {
   EXPECT_NEAR(summary[1].mean_travel_m, 40 * 100 * M_PI * 0.08 / 1000, 1e-12);
   EXPECT_NEAR(summary[0].mean_turn_rad, -20 * 100 * M_PI * 0.08 / 1000 / 0.2, 1e-12);
   EXPECT_NE(files.back().text.find("robot: {wheelbase: 0.2"), std::string::npos);
+}
+
+// Each experiment's group is its session by default (the session directory's name: the cw and
+// ccw experiments of one session share it) or, with OptiOdomGroup::day, the recording day. Two
+// real sessions of data/optiodom: 230620202042 (20:42 on 23 June 2020) and 231220200029 (00:29 on
+// 23 December 2020, which counts to the evening of the 22nd).
+TEST(OptiOdom, GroupIsTheSessionOrTheDay) {
+  const std::string diff = ODOMCOV_SOURCE_DIR "/data/optiodom/data/diff/square/";
+  auto groups = [&](OptiOdomGroup group) {
+    OptiOdomOptions o;
+    o.sessions = {diff + "230620202042", diff + "231220200029"};
+    o.wheelbase_m = 0.2;
+    o.diameters_m = {{0.084, 0.084}};
+    o.group = group;
+    const auto dir = test::scratch_dir("optiodom_group");
+    for (const ImportedFile& f : import_optiodom(o)) {
+      std::filesystem::create_directories((dir / f.path).parent_path());
+      std::ofstream(dir / f.path) << f.text;
+    }
+    std::map<std::string, std::string> by_name;
+    for (const SuiteExperiment& ex : load_suite((dir / "suite.yaml").string()).experiments) {
+      by_name[ex.name] = ex.group;
+    }
+    return by_name;
+  };
+  const std::map<std::string, std::string> sessions = groups(OptiOdomGroup::session);
+  EXPECT_EQ(sessions, groups(OptiOdomOptions{}.group));  // the session is the default
+  const std::map<std::string, std::string> expected_sessions{
+      {"square-230620202042-ccw", "230620202042"}, {"square-230620202042-cw", "230620202042"},
+      {"square-231220200029-ccw", "231220200029"}, {"square-231220200029-cw", "231220200029"}};
+  EXPECT_EQ(sessions, expected_sessions);
+  const std::map<std::string, std::string> expected_days{
+      {"square-230620202042-ccw", "2020-06-23"}, {"square-230620202042-cw", "2020-06-23"},
+      {"square-231220200029-ccw", "2020-12-22"}, {"square-231220200029-cw", "2020-12-22"}};
+  EXPECT_EQ(groups(OptiOdomGroup::day), expected_days);
 }
 
 // The metadata row "Di,D1,D2" gives the diameter of the wheel of the first encoder column (odoR,

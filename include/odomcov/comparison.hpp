@@ -72,5 +72,8 @@ struct Comparison {
 /// such a model's covariance LRTs are then scaled by each experiment's measured kurtosis
 /// ([Browne84]).
 Comparison compare(const Suite& suite, const SuiteModel& model, double alpha);
+/// The same from the model's residuals(suite, model), already computed (diagnose's cache).
+Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
+                   const std::vector<std::vector<RunResidual>>& residuals);
 
 }  // namespace odomcov

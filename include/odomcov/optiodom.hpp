@@ -12,6 +12,10 @@
 
 namespace odomcov {
 
+/// What an experiment's `group:` is: its session (the session directory's name, as the
+/// recordings write it: one group per session) or the recording day the session belongs to.
+enum class OptiOdomGroup { session, day };
+
 struct OptiOdomOptions {
   std::vector<std::string> sessions;  // session directories, e.g. .../diff/square/230620202042
   std::optional<double> wheelbase_m;  // nominal robot; default: the sessions' metadata Li
@@ -19,6 +23,7 @@ struct OptiOdomOptions {
   double k = 1e-3;  // nominal wheel noise for the suite's robot (to be fitted)
   MeasurementNoise measurement_noise{0.001, 0.1 * kDegToRad};  // OptiTrack, conservative
   std::string name = "optiodom";
+  OptiOdomGroup group = OptiOdomGroup::session;
 };
 
 /// Reads every session (metadata and run files, validated) and returns the suite's files:
@@ -27,8 +32,9 @@ struct OptiOdomOptions {
 /// no quadrature factor (README). Runs are grouped into experiments by path type (the session's
 /// parent folder), session and, for the calibration paths, turning direction (cw, ccw or
 /// straight from the sign of the encoders' total heading change). Each experiment's `group` is
-/// its recording session: the evening its session directory (named DDMMYYYYhhmm, the start
-/// time) belongs to, as YYYY-MM-DD, a start before 06:00 counting to the evening before.
+/// its session, the session directory's name (OptiOdomGroup::session), or the recording day
+/// (OptiOdomGroup::day): the evening its session directory (named DDMMYYYYhhmm, the start time)
+/// belongs to, as YYYY-MM-DD, a start before 06:00 counting to the evening before.
 std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
                                           std::vector<ImportSummary>* summary = nullptr);
 

@@ -78,6 +78,11 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<doub
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effects);
 
+/// predict(...).mean alone, by the same arithmetic (bit for bit), without the covariance and
+/// the noise-induced mean: for derivatives of the systematic mean (group_variation's column).
+Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                     const Robot& robot, const EffectList& effects);
+
 /// The engine's prediction after every piece, for covariance along a trajectory (an encoder
 /// log, one piece per sample): element 0 is the start (all zero), element i the state after
 /// pieces[0 .. i-1]. Same frames and conventions as predict().

@@ -55,6 +55,23 @@ def test_predict_with_effects_uses_the_engine():
         odomcov.predict(left, right, 0.5, 1e-3, 1e-3, effects=[{"wheel_diamter_ratio": {"Ed": 1.0}}])
 
 
+def test_predict_takes_every_effect_the_configs_take():
+    # The effects go through the configs' own parser: a custom effect written as the built-in
+    # turn_dependent_wheelbase gives its numbers bit for bit, and errors name the key.
+    t = np.linspace(0, 1, 201)
+    left, right = 2.0 * t, 2.0 * t + 0.6 * np.sin(3 * t)
+    builtin = odomcov.predict(left, right, 0.5, 1e-3, 1e-3,
+                              effects=[{"turn_dependent_wheelbase": {"Eb_arc": 1.01, "Eb_spin": 1.03}}])
+    custom = odomcov.predict(left, right, 0.5, 1e-3, 1e-3, effects=[{"custom": {
+        "name": "tdw", "parameters": {"Eb_arc": 1.01, "Eb_spin": 1.03},
+        "wheelbase_factor": "Eb_arc + (Eb_spin - Eb_arc) * r"}}])
+    assert np.array_equal(builtin["mean"], custom["mean"]) and np.array_equal(builtin["cov"], custom["cov"])
+    assert np.abs(builtin["mean"]).max() > 0
+    with pytest.raises(ValueError, match=r"effects\[0\]\.custom\.parameters"):
+        odomcov.predict(left, right, 0.5, 1e-3, 1e-3,
+                        effects=[{"custom": {"name": "x", "parameters": [1], "scale": "1"}}])
+
+
 def test_step_api():
     odo = odomcov.OdometryCovariance(0.5, 1e-3, 2e-3)
     s = odo.step(1.0, 1.2)

@@ -45,23 +45,30 @@ void check_effect_names(const std::vector<std::string>& effects) {
   }
 }
 
-/// --candidates FILE: the user's own hypotheses, each new to the suite's model and with a
-/// parameter to fit.
+/// --candidates FILE: the user's own hypotheses, each with a parameter to fit. A candidate the
+/// suite's model already has (the same catalogue effect, or a custom one with the same
+/// definition, adopted in an earlier round) is left out, as the catalogue's are; a custom one
+/// with the name of a different effect in the model is a clash.
 EffectList load_candidates(const std::string& file, const Suite& suite) {
   if (file.empty()) return {};
+  EffectList candidates;
   const EffectList own = load_effects(file);
   for (std::size_t i = 0; i < own.size(); ++i) {
     const int line = own[i].custom ? own[i].custom->line : 0;
-    if (find_spec(suite.model_effects, own[i].name)) {
-      throw InputError(file, line, "[" + std::to_string(i) + "]",
-                       "name clash: " + quote(own[i].name) + " is already in the suite's model");
-    }
     if (own[i].values.empty()) {
       throw InputError(file, line, "[" + std::to_string(i) + "]",
                        "a candidate needs a parameter to fit (custom: parameters: {name: start})");
     }
+    const EffectSpec* in_model = find_spec(suite.model_effects, own[i].name);
+    if (!in_model) {
+      candidates.push_back(own[i]);
+    } else if (own[i].custom && !(in_model->custom && *in_model->custom == *own[i].custom)) {
+      throw InputError(file, line, "[" + std::to_string(i) + "]",
+                       "name clash: " + quote(own[i].name) +
+                           " is already in the suite's model with another definition");
+    }
   }
-  return own;
+  return candidates;
 }
 
 /// The report's head, the candidates' table and the named effect with the model to adopt.
@@ -97,28 +104,50 @@ void write_ranking(std::ostream& out, const Suite& suite, const Diagnosis& d) {
   }
 }
 
+/// Corrected parameters as JSON.
+json parameters_json(const CorrectedParameters& p) {
+  return {{"wheelbase", p.wheelbase_m}, {"scale_left", p.scale_left}, {"scale_right", p.scale_right}};
+}
+
 /// The corrected odometry (UMBmark-style) in words, and as JSON (null without one).
 json write_correction(std::ostream& out, const Diagnosis& d) {
   if (!d.odometry_correction) return nullptr;
   const OdometryCorrection& c = *d.odometry_correction;
-  out << "\nThe odometry corrected by the model's systematic effects (UMBmark-style): wheelbase "
-      << format_number(c.wheelbase_m, "%.6g") << " m, wheel scales left "
-      << format_number(c.scale_left, "%.6g") << ", right " << format_number(c.scale_right, "%.6g")
-      << " (multiply each wheel's diameter by its scale).\n"
+  auto number = [](double x) { return format_number(x, "%.6g"); };
+  out << "\nThe odometry corrected by the model's systematic effects (UMBmark-style): ";
+  if (c.motion_dependent) {
+    out << "the correction depends on the motion, so each kind of experiment has its own effective "
+           "wheelbase and wheel scales (below); over all runs wheelbase "
+        << number(c.parameters.wheelbase_m) << " m";
+  } else {
+    out << "wheelbase " << number(c.parameters.wheelbase_m) << " m";
+  }
+  out << ", wheel scales left " << number(c.parameters.scale_left) << ", right "
+      << number(c.parameters.scale_right) << " (multiply each wheel's diameter by its scale).\n"
       << "End-pose x-y error with the runs re-integrated, before and after [mm]:\n"
-      << "  kind          runs  mean before  mean after  Emax before  Emax after\n";
+      << "  kind          runs  mean before  mean after  Emax before  Emax after";
+  out << (c.motion_dependent ? "  wheelbase [m]  scale left  scale right\n" : "\n");
   json kinds = json::array();
   for (const CorrectionByKind& k : c.by_kind) {
-    char line[200];
-    std::snprintf(line, sizeof line, "  %-12s %5zu %12.1f %11.1f %12.1f %11.1f\n", k.kind.c_str(), k.runs, 1e3 * k.mean_xy_before_m, 1e3 * k.mean_xy_after_m,
-                  1e3 * k.emax_before_m, 1e3 * k.emax_after_m);
+    char line[256];
+    std::snprintf(line, sizeof line, "  %-12s %5zu %12.1f %11.1f %12.1f %11.1f", k.kind.c_str(), k.runs,
+                  1e3 * k.mean_xy_before_m, 1e3 * k.mean_xy_after_m, 1e3 * k.emax_before_m, 1e3 * k.emax_after_m);
     out << line;
-    kinds.push_back({{"kind", k.kind}, {"runs", k.runs}, {"mean_xy_before", k.mean_xy_before_m},
-                     {"mean_xy_after", k.mean_xy_after_m}, {"emax_sys_before", k.emax_before_m},
-                     {"emax_sys_after", k.emax_after_m}});
+    if (c.motion_dependent) {
+      std::snprintf(line, sizeof line, "  %13.6g %11.6g %12.6g", k.parameters.wheelbase_m,
+                    k.parameters.scale_left, k.parameters.scale_right);
+      out << line;
+    }
+    out << "\n";
+    json kind = parameters_json(k.parameters);
+    kind.update({{"kind", k.kind}, {"runs", k.runs}, {"mean_xy_before", k.mean_xy_before_m},
+                 {"mean_xy_after", k.mean_xy_after_m}, {"emax_sys_before", k.emax_before_m},
+                 {"emax_sys_after", k.emax_after_m}});
+    kinds.push_back(kind);
   }
-  return {{"wheelbase", c.wheelbase_m}, {"scale_left", c.scale_left},
-          {"scale_right", c.scale_right}, {"by_kind", kinds}};
+  json all = parameters_json(c.parameters);
+  all.update({{"motion_dependent", c.motion_dependent}, {"by_kind", kinds}});
+  return all;
 }
 
 /// docs/json.md, "JSON of diagnose".

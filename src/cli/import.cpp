@@ -1,5 +1,6 @@
 // odomcov import optiodom SESSION_DIR... --out DIR [--wheelbase B] [--diameters DL,DR] [--k K]
 //                                         [--xy M] [--theta-deg D] [--name NAME] [--json FILE]
+//                                         [--group session|day]
 // odomcov import csv LOG.csv|DIR... --out DIR --wheelbase B [--left-scale S] [--right-scale S]
 //                    [--k K] [--xy M] [--theta-deg D] [--name NAME] [--json FILE]
 // Convert recordings into a measurement suite with per-run encoder logs.
@@ -25,6 +26,7 @@ struct ImportOptions {
   double theta_deg = 0.1;
   std::string name = "optiodom";
   std::string json;
+  std::string group = "session";  // or "day"
 };
 
 /// Writes an import's files (every file was read and checked before: bad input writes nothing),
@@ -80,6 +82,7 @@ int run_import(const ImportOptions& opt) {
   o.k = opt.k;
   o.measurement_noise = {opt.xy, opt.theta_deg * kDegToRad};
   o.name = opt.name;
+  o.group = opt.group == "day" ? OptiOdomGroup::day : OptiOdomGroup::session;
   std::vector<ImportSummary> summary;
   const std::vector<ImportedFile> files = import_optiodom(o, &summary);  // all read first
   write_import("optiodom", std::to_string(opt.sessions.size()) + " sessions", opt.out, opt.json, files,
@@ -142,6 +145,11 @@ void setup_import(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   sub->add_option("--name", opt->name, "Suite name")->capture_default_str();
   sub->add_option("--json", opt->json, "Write a summary as JSON to this file");
+  sub->add_option("--group", opt->group,
+                  "Each experiment's group: its session (the session directory) or the recording "
+                  "day (YYYY-MM-DD, a start before 06:00 counting to the evening before)")
+      ->check(CLI::IsMember({"session", "day"}))
+      ->capture_default_str();
   sub->callback([opt, &exit_code] { exit_code = run_import(*opt); });
 
   auto copt = std::make_shared<CsvOptions>();

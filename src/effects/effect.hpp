@@ -196,13 +196,18 @@ class Effect {
 /// factors applied), the white noise intensity of (e_dtheta, e_d) over the piece, and the effect
 /// of each standard-normal per-run constant on (e_dtheta, e_d). The first-order engine (predict)
 /// and any higher-order propagator consume these, so effects are modelled in one place.
+/// The most standard-normal per-run constants a model may carry (per_run_radius has two); the
+/// engine keeps their columns in fixed storage.
+inline constexpr int kMaxRunConstants = 4;
+
 struct ResolvedPiece {
   ArcSegment encoder;            // encoder travel over the piece
   double center_m = 0.0;         // true centre travel d
   double angle_rad = 0.0;        // true heading change a
   double wheelbase_true_m = 0.0;
   Matrix2 intensity = Matrix2::Zero();  // cov of (e_dtheta, e_d) accumulated over the piece
-  Eigen::MatrixXd input_columns;        // 2 x run_constants: per-run constants -> (e_dtheta, e_d)
+  // 2 x run_constants: per-run constants -> (e_dtheta, e_d)
+  Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, kMaxRunConstants> input_columns;
 };
 
 /// The resolved path, plus what acts after the path: the measurement hooks (reference_offset).
