@@ -3,7 +3,9 @@
 // (the default of fit and diagnose).
 //  * BM_Likelihood: one exact evaluation (every run propagated), the unit both paths pay;
 //  * BM_DiagnoseRound: one diagnose round from the plain model (11 candidates);
-//  * BM_Fit: the joint fit of Ed and Eb.
+//  * BM_Fit: the joint fit of Ed and Eb;
+//  * BM_Loop: the diagnose loop (scripts/diagnose_loop.py's, in the library): diagnose, adopt
+//    the best candidate, repeat until nothing is significant or 8 rounds.
 // Each on the fast path (FitPath::fast: linearised, re-anchored) and, with
 // ODOMCOV_BENCH_EXACT=1 in the environment, the exact one (minutes per round). The counter
 // `propagations` is the number of exact likelihood evaluations per iteration.
@@ -84,6 +86,33 @@ void BM_DiagnoseRound(benchmark::State& state) {
   state.counters["runs"] = static_cast<double>(runs(suite));
 }
 
+/// The library loop of scripts/diagnose_loop.py: diagnose, adopt the best candidate's model,
+/// repeat until no candidate is significant (or kLoopRounds rounds). Counters: rounds done,
+/// propagations in all, the NEES mean of the final model.
+constexpr int kLoopRounds = 8;
+
+void BM_Loop(benchmark::State& state) {
+  const odomcov::Suite& suite = optiodom();
+  double rounds = 0, propagations = 0, nees = 0;
+  for (auto _ : state) {
+    odomcov::SuiteModel model = odomcov::suite_model(suite);
+    odomcov::DiagnoseProgress progress;
+    int round = 0;
+    for (; round < kLoopRounds; ++round) {
+      const odomcov::Diagnosis d = odomcov::diagnose(suite, model, odomcov::kDiagnoseAlpha, {},
+                                                     &progress, {}, path_of(state));
+      nees = d.after.nees_mean;
+      if (!d.best) break;
+      model = d.candidates[*d.best].model;
+    }
+    rounds = round + (round < kLoopRounds ? 1 : 0);  // the last round names nothing
+    propagations = static_cast<double>(progress.evaluations.load());
+  }
+  state.counters["rounds"] = rounds;
+  state.counters["propagations"] = propagations;
+  state.counters["nees"] = nees;
+}
+
 void BM_Fit(benchmark::State& state) {
   const odomcov::Suite& suite = optiodom();
   const odomcov::SuiteModel model = odomcov::suite_model(suite);
@@ -104,6 +133,7 @@ const bool kExact = std::getenv("ODOMCOV_BENCH_EXACT") != nullptr;
 
 BENCHMARK(BM_Likelihood)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
 BENCHMARK(BM_DiagnoseRound)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
+BENCHMARK(BM_Loop)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
 BENCHMARK(BM_Fit)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 const bool kRegistered = kExact && [] {
   benchmark::RegisterBenchmark("BM_DiagnoseRound/exact", [](benchmark::State& s) { BM_DiagnoseRound(s); })

@@ -5,7 +5,7 @@
 //    O(n^3), what the sequential form avoids (group_test checks they agree to 1e-9);
 //  * Residuals{Plain,Grouped}: residuals() of the 180-run world of
 //    configs/effects/group_variation.yaml without and with group_variation in the model (the
-//    group terms cost three first-order mean predictions per path or logged run).
+//    group terms cost two mean-only propagations per logged run, three per planned path).
 // Run: cmake --build build --target bench
 #include <benchmark/benchmark.h>
 

@@ -23,12 +23,15 @@ def held_model(report):
 
 def sizes(report):
     fit = report.get("fit")
-    if not fit:  # a loop stopped before its joint fit: each effect as diagnose sized it
+    identified = fit and any(se is not None for se in fit["stderr"].values())
+    if not identified:  # no joint fit, or one the data cannot pin down: as diagnose sized each
+        if not any(s["named"] for s in report["rounds"]):
+            return "nothing"
+        why = "no joint fit" if not fit else "the joint fit is not identified (" + \
+            "; ".join(fit.get("warnings", [])) + ")"
         return "; ".join(", ".join(f"{s['named']}.{k} = {plus_minus(v, s['stderr'][k], 5)}"
                                    for k, v in s["parameters"].items())
-                         for s in report["rounds"] if s["named"]) + \
-            " (no joint fit: as diagnose named them)" if any(s["named"] for s in report["rounds"]) \
-            else "nothing"
+                         for s in report["rounds"] if s["named"]) + f" ({why}: as diagnose named them)"
     return ", ".join(f"{k} = {plus_minus(v, fit['stderr'][k], 5)}" for k, v in fit["parameters"].items())
 
 

@@ -103,27 +103,37 @@ if want optiodom; then
   # learnt on some runs of the one imported suite and judged on the others: by path type (train
   # on the squares and Ivanjko paths, test on the circles and free paths), and by campaign
   # (December 2020 -> June 2020, and the reverse; the January 2021 free paths are in neither).
-  # group: is the session, so group_variation is among diagnose's candidates in every loop, and
-  # the custom hypotheses of candidates.yaml (written from the residual alignment: speed, spin
-  # fraction, turn direction) are ranked beside the catalogue. Order 2 (the fast path makes it
-  # affordable).
+  # group: is the session, so group_variation is among diagnose's candidates in every loop. Order
+  # 2 (the fast path makes it affordable). Each split runs twice: with the catalogue (the study's
+  # models), and as NAME_custom with the custom hypotheses of candidates.yaml ranked beside it
+  # (written from the residual alignment: speed, spin fraction, turn direction); ablation.md
+  # then asks whether what the custom loops named helps on the held-out runs.
   loop() {  # NAME [diagnose_loop.py options]
-    local name=$1 dir="$suite-loop-$1" holdout=()
+    local name=$1 dir="$suite-loop-$1" holdout=() custom=()
     shift
     [[ $# -gt 0 ]] && holdout=(--holdout)
+    [[ $name == *_custom ]] && custom=(--candidates "$out/candidates.yaml")
     rm -rf "$dir"
     save "$out/loop_$name.md" "$python" scripts/diagnose_loop.py --odomcov "$odomcov" \
-      "$suite/suite.yaml" --out "$dir" --order 2 --candidates "$out/candidates.yaml" "$@"
+      "$suite/suite.yaml" --out "$dir" --order 2 --rounds 12 "${custom[@]}" "$@"
     cp "$dir/loop.json" "$out/loop_$name.json"
-    "$python" scripts/plot_loop.py "$dir" "${holdout[@]}" --out "$out/loop_$name.png"
+    [[ $name == *_custom ]] || "$python" scripts/plot_loop.py "$dir" "${holdout[@]}" --out "$out/loop_$name.png"
   }
-  loop all
+  for variant in "" _custom; do
+    loop "all$variant"
+    loop "paths$variant" --train '^(square|ivanjko)-' --test '^(circular|free)-'
+    loop "dec_to_jun$variant" --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'
+    loop "jun_to_dec$variant" --train '^[a-z]+-(2306|2506)' --test '^[a-z]+-2312'
+  done
   # The robot and model the loop built, to paste into a suite.
   save "$out/model_all.yaml" sed -n '/^robot:/p; /^model:/,/^experiments:/{/^experiments:/!p}' \
     "$suite-loop-all/suite.yaml"
-  loop paths --train '^(square|ivanjko)-' --test '^(circular|free)-'
-  loop dec_to_jun --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'
-  loop jun_to_dec --train '^[a-z]+-(2306|2506)' --test '^[a-z]+-2312'
+  # Each hold-out's joint fit without the custom effects its loop named, refitted: do they help on
+  # the runs the loop never saw? (issue 10: keep a hypothesis only if it does.)
+  save "$out/ablation.md" "$python" scripts/optiodom_ablation.py --odomcov "$odomcov" \
+    --out "$suite-ablation" "paths:$suite-loop-paths_custom" "dec_to_jun:$suite-loop-dec_to_jun_custom" \
+    "jun_to_dec:$suite-loop-jun_to_dec_custom"
+  cp "$suite-ablation/ablation.json" "$out/ablation.json"
   # Groups by session against groups by day (import --group day), on the in-sample and path-type
   # models; and June -> December with a session group_variation of the spin wheelbase learnt in
   # June (its loop ends consistent without one), so December is predicted with the between-session

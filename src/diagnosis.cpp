@@ -134,9 +134,12 @@ bool neutral_at_edge(const EffectParameterInfo& p) { return p.neutral == p.lower
 
 /// The group_variation candidate varying `target` ("wheelbase_error.Eb"): it fits the varied
 /// parameter too when its effect is not in the model yet (joining at its neutral value), and
-/// group_variation's sd from its typical size; it reads as group_variation's physics and
+/// group_variation's sd; it reads as group_variation's physics and
 /// signature. On the boundary when every fitted size is (sd, and the new parameter's).
-CandidateType group_candidate(const std::string& target, const EffectList& model) {
+/// sd starts at its typical size, or with `neutral_start` (the fast path) at 0: the candidate
+/// then does nothing at its start, so its anchor and the nuisance parameters' difference points
+/// are the base model's, computed once per round (ResidualCache).
+CandidateType group_candidate(const std::string& target, const EffectList& model, bool neutral_start) {
   const EffectInfo& group = *find_effect(kGroupVariation);
   const std::string effect = target.substr(0, target.find('.'));
   CandidateType c;
@@ -157,7 +160,8 @@ CandidateType group_candidate(const std::string& target, const EffectList& model
     c.start.push_back(spec);
     c.fitted.push_back(target);
   }
-  c.start.push_back({kGroupVariation, {group.parameters[0].typical}, target});
+  c.start.push_back({kGroupVariation,
+                     {neutral_start ? group.parameters[0].neutral : group.parameters[0].typical}, target});
   c.fitted.push_back(std::string(kGroupVariation) + "." + group.parameters[0].name);
   c.on_boundary = c.on_boundary && neutral_at_edge(group.parameters[0]);
   return c;
@@ -166,7 +170,8 @@ CandidateType group_candidate(const std::string& target, const EffectList& model
 /// The group_variation candidates: one per systematic parameter of the model's effects, and one
 /// per catalogue parameter that varies between groups (EffectParameterInfo) when the model
 /// lacks it. Only for suites that give groups, and when the model has no group_variation yet.
-std::vector<CandidateType> group_candidates(const Suite& suite, const EffectList& model) {
+std::vector<CandidateType> group_candidates(const Suite& suite, const EffectList& model,
+                                            bool neutral_start) {
   bool grouped = false;
   for (const SuiteExperiment& ex : suite.experiments) grouped = grouped || !ex.group.empty();
   if (!grouped || find_spec(model, kGroupVariation)) return {};
@@ -184,22 +189,22 @@ std::vector<CandidateType> group_candidates(const Suite& suite, const EffectList
     }
   }
   std::vector<CandidateType> out;
-  for (const std::string& t : targets) out.push_back(group_candidate(t, model));
+  for (const std::string& t : targets) out.push_back(group_candidate(t, model, neutral_start));
   return out;
 }
 
 /// The round's candidates: the catalogue's effects not in the model (grouped ones only as group
 /// candidates), the group candidates, the robot candidates; only those `only` names (by their
 /// name or their effect's) when given; then the user's own candidates, each from its given
-/// values (a given catalogue candidate starts there too).
+/// values (a given catalogue candidate starts there too). `neutral_start`: see group_candidate.
 std::vector<CandidateType> round_candidates(const Suite& suite, const EffectList& model,
                                             const std::vector<std::string>& only,
-                                            const EffectList& given) {
+                                            const EffectList& given, bool neutral_start) {
   std::vector<CandidateType> types;
   for (const CandidateType& t : candidate_types()) {
     if (!t.robot && !find_spec(model, t.name) && !find_effect(t.name)->grouped) types.push_back(t);
   }
-  for (CandidateType& t : group_candidates(suite, model)) types.push_back(std::move(t));
+  for (CandidateType& t : group_candidates(suite, model, neutral_start)) types.push_back(std::move(t));
   for (const CandidateType& t : candidate_types()) {
     if (t.robot) types.push_back(t);
   }
@@ -270,7 +275,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   const double base_scatter = scatter_log_likelihood(base_residuals);
   const std::vector<double> base_by_experiment = experiment_log_likelihoods(base_residuals);
 
-  const std::vector<CandidateType> types = round_candidates(suite, model.effects, only, candidates);
+  const std::vector<CandidateType> types =
+      round_candidates(suite, model.effects, only, candidates, path == FitPath::fast);
 
   // The fits: the base refit, one per candidate and the winner's refit.
   if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;

@@ -74,36 +74,77 @@ std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m,
 }
 
 namespace effects {
+namespace {
+
+/// Walks the encoder pieces as the effects see them: each piece cut where a history effect
+/// changes its factors inside it (backlash taken up; split_at), and for every resulting piece
+/// calls each(encoder, motion, systematic) with its motion and the effects' systematic factors
+/// folded in. Without effects nothing reads the motion, and it is not computed.
+template <class Each>
+void for_each_piece(const std::vector<ArcSegment>& encoder_pieces,
+                    const std::vector<double>& durations_s, double wheelbase_m,
+                    const std::vector<std::unique_ptr<Effect>>& active, Each&& each) {
+  bool splits = false;  // a history effect may cut pieces (split_at)
+  for (const auto& e : active) splits = splits || e->dependence() == Dependence::history;
+  MotionTracker tracker(wheelbase_m);
+  Motion motion;
+  auto one = [&](const ArcSegment& encoder, double dt) {
+    Systematic sys;
+    if (!active.empty()) {
+      motion = tracker.next(encoder.left_m, encoder.right_m, dt);
+      for (const auto& e : active) e->systematic(motion, sys);
+    }
+    each(encoder, motion, sys);
+  };
+  for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
+    ArcSegment rest = encoder_pieces[i];
+    double dt = durations_s.empty() ? std::nan("") : durations_s[i];
+    for (int cut = 0; splits && cut < 4; ++cut) {
+      MotionTracker probe = tracker;
+      const Motion whole = probe.next(rest.left_m, rest.right_m, dt);
+      double f = 1.0;
+      for (const auto& e : active) f = std::min(f, e->split_at(whole));
+      if (!(f > 1e-12 && f < 1.0 - 1e-12)) break;
+      one({f * rest.left_m, f * rest.right_m}, f * dt);
+      rest = {(1.0 - f) * rest.left_m, (1.0 - f) * rest.right_m};
+      dt *= 1.0 - f;
+    }
+    one(rest, dt);
+  }
+}
+
+/// The measurement hooks of the active effects (moved out of `active`).
+std::vector<std::shared_ptr<const Effect>> measurement_effects(std::vector<std::unique_ptr<Effect>>& active) {
+  std::vector<std::shared_ptr<const Effect>> out;
+  for (auto& e : active) {
+    if (e->measures()) out.push_back(std::shared_ptr<const Effect>(std::move(e)));
+  }
+  return out;
+}
+
+}  // namespace
 
 ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
                      const std::vector<double>& durations_s, const Robot& robot,
                      const EffectList& effect_list) {
   auto active = instantiate(effect_list);
   ResolvedPath out;
-  bool splits = false;  // a history effect may cut pieces (split_at)
-  for (const auto& e : active) {
-    out.run_constants += e->run_constants();
-    splits = splits || e->dependence() == Dependence::history;
-  }
+  for (const auto& e : active) out.run_constants += e->run_constants();
   if (out.run_constants > kMaxRunConstants) {
     throw std::logic_error("resolve: more per-run constants than kMaxRunConstants");
   }
   const double B = robot.wheelbase_m;
-  MotionTracker tracker(B);
   out.pieces.reserve(encoder_pieces.size());
   // One PieceModel serves every piece: its run columns keep their storage, so the loop does
-  // not allocate. Without effects nothing reads the motion, and it is not computed.
+  // not allocate.
   PieceModel m;
   double inverse_for = 0.0, inverse = 0.0;  // 1/b for the true wheelbase b = inverse_for
   m.wheelbase_m = B;
   m.noise = robot.noise;
-  auto add_piece = [&](const ArcSegment& encoder, double dt) {
+  for_each_piece(encoder_pieces, durations_s, B, active,
+                 [&](const ArcSegment& encoder, const Motion& motion, const Systematic& sys) {
     m.encoder = encoder;
-    Systematic sys;
-    if (!active.empty()) {
-      m.motion = tracker.next(encoder.left_m, encoder.right_m, dt);
-      for (const auto& e : active) e->systematic(m.motion, sys);
-    }
+    m.motion = motion;
     m.scale_left = sys.scale_left;
     m.scale_right = sys.scale_right;
     m.wheelbase_factor = sys.wheelbase_factor;
@@ -135,26 +176,8 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
       const Eigen::Vector2d& w = m.run_columns.at(static_cast<std::size_t>(c));
       r.input_columns.col(c) << (w.y() - w.x()) * inverse, 0.5 * (w.x() + w.y());
     }
-  };
-  for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
-    ArcSegment rest = encoder_pieces[i];
-    double dt = durations_s.empty() ? std::nan("") : durations_s[i];
-    // A history effect may change its factors inside the piece (backlash taken up): split there.
-    for (int cut = 0; splits && cut < 4; ++cut) {
-      MotionTracker probe = tracker;
-      const Motion whole = probe.next(rest.left_m, rest.right_m, dt);
-      double f = 1.0;
-      for (const auto& e : active) f = std::min(f, e->split_at(whole));
-      if (!(f > 1e-12 && f < 1.0 - 1e-12)) break;
-      add_piece({f * rest.left_m, f * rest.right_m}, f * dt);
-      rest = {(1.0 - f) * rest.left_m, (1.0 - f) * rest.right_m};
-      dt *= 1.0 - f;
-    }
-    add_piece(rest, dt);
-  }
-  for (auto& e : active) {
-    if (e->measures()) out.measurement_effects.push_back(std::shared_ptr<const Effect>(std::move(e)));
-  }
+  });
+  out.measurement_effects = measurement_effects(active);
   return out;
 }
 
@@ -277,22 +300,29 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
 
 Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                      const Robot& robot, const EffectList& effect_list) {
-  const effects::ResolvedPath path = effects::resolve(pieces, durations_s, robot, effect_list);
+  // resolve's pieces, streamed: only their true arcs (the same arithmetic), nothing stored.
+  auto active = effects::instantiate(effect_list);
   const double B = robot.wheelbase_m;
   PoseWalker true_pose, odometry;
-  for (const effects::ResolvedPiece& r : path.pieces) {
-    const detail::ArcStep f(r.angle_rad);
-    true_pose.step(r.center_m, f);
-    const double d_odometry = r.encoder.center_m(), a_odometry = r.encoder.heading_change_rad(B);
-    if (d_odometry == r.center_m && a_odometry == r.angle_rad) {
-      odometry.step(r.center_m, f);
+  effects::for_each_piece(pieces, durations_s, B, active,
+                          [&](const ArcSegment& encoder, const effects::Motion&,
+                              const effects::Systematic& sys) {
+    const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
+    const double center = travel.center_m(), angle = travel.heading_change_rad(sys.wheelbase_factor * B);
+    const detail::ArcStep f(angle);
+    true_pose.step(center, f);
+    const double d_odometry = encoder.center_m(), a_odometry = encoder.heading_change_rad(B);
+    if (d_odometry == center && a_odometry == angle) {
+      odometry.step(center, f);
     } else {
       odometry.step(d_odometry, detail::ArcStep(a_odometry));
     }
-  }
+  });
+  effects::ResolvedPath hooks;
+  hooks.measurement_effects = effects::measurement_effects(active);
   Vector3 measured = true_pose.pose();
   Matrix3 unused = Matrix3::Zero();
-  path.measure(measured, unused);
+  hooks.measure(measured, unused);
   return pose_error(measured, odometry.pose());
 }
 

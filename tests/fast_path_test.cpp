@@ -95,14 +95,13 @@ TEST(FastPath, FitMatchesExactOnOptiOdomSquares) {
                   Likelihood::full);
 }
 
-TEST(FastPath, DiagnoseMatchesExact) {
-  // Every candidate of the catalogue: same significance and the same best, gains within the
-  // tolerance, and where a parameter has a standard error, the same value within 0.1 of it.
-  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "diag");
-  SuiteModel model = suite_model(lab);
-  model.effects = {{"wheel_diameter_ratio", {1.0}}};
-  const Diagnosis exact = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, {}, FitPath::exact);
-  const Diagnosis fast = diagnose(lab, model, kDiagnoseAlpha, {}, nullptr, {}, FitPath::fast);
+/// Every candidate: same significance and the same best, gains within the tolerance, and where
+/// a parameter has a standard error, the same value within 0.1 of it. `fast_out` receives the
+/// fast diagnosis.
+void expect_same_diagnosis(const Suite& suite, const SuiteModel& model,
+                           const std::vector<std::string>& only = {}, Diagnosis* fast_out = nullptr) {
+  const Diagnosis exact = diagnose(suite, model, kDiagnoseAlpha, only, nullptr, {}, FitPath::exact);
+  const Diagnosis fast = diagnose(suite, model, kDiagnoseAlpha, only, nullptr, {}, FitPath::fast);
   ASSERT_EQ(fast.candidates.size(), exact.candidates.size());
   ASSERT_TRUE(exact.best.has_value());
   ASSERT_TRUE(fast.best.has_value());
@@ -120,6 +119,28 @@ TEST(FastPath, DiagnoseMatchesExact) {
     }
   }
   EXPECT_NEAR(fast.after.log_likelihood, exact.after.log_likelihood, kLogLikelihoodTolerance);
+  if (fast_out) *fast_out = fast;
+}
+
+TEST(FastPath, DiagnoseMatchesExact) {
+  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "diag");
+  SuiteModel model = suite_model(lab);
+  model.effects = {{"wheel_diameter_ratio", {1.0}}};
+  expect_same_diagnosis(lab, model);
+}
+
+TEST(FastPath, GroupCandidatesMatchExact) {
+  // The fast path starts a group candidate at sd = 0 (its anchor is then the base model's), the
+  // exact one at sd's typical size: the same optimum within the same tolerances. The world of
+  // configs/effects/group_variation.yaml: Eb varies between six sessions.
+  const Suite days = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/effects/group_variation.yaml"), "group");
+  SuiteModel model = suite_model(days);
+  model.effects = {{"wheelbase_error", {1.0}}};
+  Diagnosis fast;
+  expect_same_diagnosis(days, model, {kGroupVariation, "wheel_diameter_ratio"}, &fast);
+  ASSERT_TRUE(fast.best.has_value());
+  EXPECT_EQ(fast.candidates[*fast.best].effect, "group_variation(wheelbase_error.Eb)");
+  EXPECT_GE(fast.candidates.size(), 3u);  // the group variations of Eb and Ed, and Ed
 }
 
 TEST(FastPath, EveryRegisteredParameterHasAFitCoordinateAndEveryEffectACandidate) {
