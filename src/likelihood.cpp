@@ -30,24 +30,25 @@ constexpr int kDim = 3;
 /// E[f z] and the shift E[f] - f exactly for polynomials of degree 3 and 5), h kept within half
 /// the distance to the parameter's bounds. f at the value is `mean`: a logged run passes its
 /// prediction's (on fine pieces predict_with_order's mean is predict_mean's bit for bit; on
-/// pieces it cannot coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative).
-/// Two mean-only propagations per run.
+/// pieces it cannot coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative),
+/// and its odometry end pose, which the shifted parameter does not change. Two mean-only
+/// propagations per run.
 struct GroupTerms {
   Vector3 shift = Vector3::Zero(), column = Vector3::Zero(), column2 = Vector3::Zero();
 };
 
 GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
                        const Robot& robot, const EffectList& effects, const GroupTarget& target,
-                       const Vector3& mid) {
+                       const Vector3& mid, const Vector3* odometry_end_pose = nullptr) {
   if (!target.present || target.sd == 0.0) return {};
   const double value = effects[target.effect].values[target.parameter];
   const EffectParameterInfo& p = info_of(effects[target.effect])->parameters[target.parameter];
   const double h = std::min({std::sqrt(3.0) * target.sd, 0.5 * (value - p.lower), 0.5 * (p.upper - value)});
   EffectList shifted = effects;
   shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict_mean(pieces, durations, robot, shifted);
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
   shifted[target.effect].values[target.parameter] = value - h;
-  const Vector3 down = predict_mean(pieces, durations, robot, shifted);
+  const Vector3 down = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
   const double sd2_h2 = target.sd * target.sd / (h * h);  // 1/3 unless h is cut by a bound
   const Vector3 curvature = up + down - 2.0 * mid;        // h^2 f''
   return {0.5 * sd2_h2 * curvature, target.sd * (up - down) / (2.0 * h),
@@ -97,6 +98,13 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     }
     for (std::size_t r = 0; r < ex.runs.size(); ++r) work.emplace_back(e, r);
   }
+  // The longest logged runs first, so that no core is left with a long one at the end (the
+  // results go to their own slots: the order changes no number).
+  auto length = [&](const std::pair<std::size_t, std::size_t>& w) {
+    const SuiteExperiment& ex = suite.experiments[w.first];
+    return ex.logged ? ex.runs[w.second].pieces.size() : std::size_t{0};
+  };
+  std::stable_sort(work.begin(), work.end(), [&](const auto& a, const auto& b) { return length(a) > length(b); });
   tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
     const auto [e, r] = work[w];
     const SuiteExperiment& ex = suite.experiments[e];
@@ -105,8 +113,8 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
       const SuiteRun& run = ex.runs[r];
       const Prediction p =
           predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
-      const GroupTerms g =
-          group_terms(run.pieces, run.durations_s, model.robot, model.effects, target, p.mean);
+      const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects,
+                                       target, p.mean, &p.odometry_end_pose);
       out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
                    p.cov + meas, g.column, group, g.column2};
       return;
