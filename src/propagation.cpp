@@ -154,8 +154,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
     m.run_columns.clear();
     for (const auto& e : active) e->model(m);
 
-    ResolvedPiece& r = out.pieces.emplace_back();
-    r.encoder = encoder;
+    ResolvedPiece& r = out.pieces.emplace_back(encoder);
     const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
     r.wheelbase_true_m = m.wheelbase_factor * B;
     r.center_m = travel.center_m();

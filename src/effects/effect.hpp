@@ -193,15 +193,19 @@ class Effect {
   virtual void model(PieceModel& piece) const { (void)piece; }
 };
 
-/// A piece as every propagator sees it once the effects have spoken: the true motion (systematic
-/// factors applied), the white noise intensity of (e_dtheta, e_d) over the piece, and the effect
-/// of each standard-normal per-run constant on (e_dtheta, e_d). The first-order engine (predict)
-/// and any higher-order propagator consume these, so effects are modelled in one place.
 /// The most standard-normal per-run constants a model may carry (per_run_radius has two); the
 /// engine keeps their columns in fixed storage.
 inline constexpr int kMaxRunConstants = 4;
 
+/// A piece as every propagator sees it once the effects have spoken: the true motion (systematic
+/// factors applied), the white noise intensity of (e_dtheta, e_d) over the piece, and the effect
+/// of each standard-normal per-run constant on (e_dtheta, e_d). The first-order engine (predict)
+/// and any higher-order propagator consume these, so effects are modelled in one place.
 struct ResolvedPiece {
+  /// Built from its encoder travel, the rest set by resolve (a user-provided constructor: the
+  /// engine's emplace_back then does not zero the whole piece first).
+  explicit ResolvedPiece(const ArcSegment& encoder_travel) : encoder(encoder_travel) {}
+
   ArcSegment encoder;            // encoder travel over the piece
   double center_m = 0.0;         // true centre travel d
   double angle_rad = 0.0;        // true heading change a
