@@ -2,12 +2,13 @@
 // data/optiodom), imported into a temporary directory by the fixture, the model of order 2
 // (the default of fit and diagnose).
 //  * BM_Likelihood: one exact evaluation (every run propagated), the unit both paths pay;
-//  * BM_DiagnoseRound: one diagnose round from the plain model (11 candidates);
+//  * BM_DiagnoseRound: one diagnose round from the plain model (13 candidates, two of them
+//    group_variation's: the imported sessions are groups);
 //  * BM_Fit: the joint fit of Ed and Eb;
 //  * BM_Loop: the diagnose loop (scripts/diagnose_loop.py's, in the library): diagnose, adopt
-//    the best candidate, repeat until nothing is significant or 8 rounds.
+//    the best candidate, repeat until nothing is significant or 8 rounds (fast path only).
 // Each on the fast path (FitPath::fast: linearised, re-anchored) and, with
-// ODOMCOV_BENCH_EXACT=1 in the environment, the exact one (minutes per round). The counter
+// ODOMCOV_BENCH_EXACT=1 in the environment, the exact one (~40 s CPU per round). The counter
 // `propagations` is the number of exact likelihood evaluations per iteration.
 // Run: cmake --build build --target bench, or build/bench/diagnose_bench directly.
 #include <benchmark/benchmark.h>

@@ -1,11 +1,11 @@
 // Cost of the grouped likelihood (group_variation, likelihood.hpp), single thread:
 //  * GroupedLogLikelihood/n: log_likelihood of n runs in 4 groups with group columns, the
-//    sequential Sherman-Morrison form (condition_on_groups), O(n);
+//    sequential form (condition_on_groups, rank-two Woodbury; these runs have one column), O(n);
 //  * DenseLogLikelihood/n: the same value from the dense (3n x 3n) covariance and its Cholesky,
 //    O(n^3), what the sequential form avoids (group_test checks they agree to 1e-9);
 //  * Residuals{Plain,Grouped}: residuals() of the 180-run world of
 //    configs/effects/group_variation.yaml without and with group_variation in the model (the
-//    group columns cost two first-order mean predictions per path or logged run).
+//    group terms cost two mean-only propagations per logged run, three per planned path).
 // Run: cmake --build build --target bench
 #include <benchmark/benchmark.h>
 

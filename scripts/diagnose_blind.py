@@ -429,8 +429,8 @@ def cases(count, rng, kind):
     group:  cycling through the group_variation cases (Eb, Ed, Es);
     ctest:  each effect alone, a noise level, the speed scale, two pairs of one systematic and one
             random effect (a calibration error with a noise source, the usual situation) and two
-            with none, none of them grouped (no group_variation worlds yet: see
-            results/diagnose/README.md);
+            with none, none of them grouped (the 16 worlds of before, unchanged); then each
+            group_variation case, and a grouped world with nothing hidden;
     none:   nothing hidden (the false-alarm rate alone), half of them grouped (coin flip)."""
     def coin():
         return rng.random() < 0.5
@@ -439,7 +439,8 @@ def cases(count, rng, kind):
     singles = [[e] for e in EFFECTS] + [[NOISE_LEVEL], [SPEED_SCALE]]
     if kind == "ctest":
         pairs = [sorted([rng.choice(SYSTEMATIC), rng.choice(RANDOM)]) for _ in range(2)]
-        return [(h, False) for h in singles + pairs + [[], []]]
+        plain = [(h, False) for h in singles + pairs + [[], []]]
+        return plain + [([g], True) for g in GROUP_CASES] + [([], True)]
     if kind == "second":
         pool = [[e] for e in SECOND] + [[SPEED_SCALE]]
         return [(pool[i % len(pool)], False) for i in range(count)]
@@ -525,7 +526,7 @@ def main():
                         default="mixed",
                         help="mixed: every kind of case in turn; second: the second catalogue "
                              "and the speed scale; group: group_variation of Eb, Ed, Es in turn; "
-                             "ctest: the blind suite's 16 worlds; none: nothing hidden (the "
+                             "ctest: the blind suite's 20 worlds; none: nothing hidden (the "
                              "false-alarm rate alone)")
     args = parser.parse_args()
 

@@ -52,21 +52,31 @@ inline constexpr std::array<double, 7> kA4 = [] {
   return t;
 }();
 
+/// The series through x^(2 Terms) (sinc: Terms <= 7), u3 through y^(2 (Terms - 1)) (<= 7),
+/// a4 through x^(2 (Terms - 1)) (<= 7).
+template <int Terms = 7>
 inline double sinc(double x2) {
   double sum = 1.0;
-  for (int k = 7; k >= 1; --k) sum = 1.0 - x2 * kSinc[k] * sum;
+  for (int k = Terms; k >= 1; --k) sum = 1.0 - x2 * kSinc[k] * sum;
   return sum;
 }
+template <int Terms = 7>
 inline double u3(double y2) {
   double sum = 1.0;
-  for (int k = 5; k >= 0; --k) sum = 1.0 - y2 * kU3[k] * sum;
+  for (int k = Terms - 2; k >= 0; --k) sum = 1.0 - y2 * kU3[k] * sum;
   return sum * (1.0 / 6.0);
 }
+template <int Terms = 7>
 inline double a4(double x2) {
-  double sum = kA4[6];
-  for (int i = 5; i >= 0; --i) sum = kA4[i] + x2 * sum;
+  double sum = kA4[Terms - 1];
+  for (int i = Terms - 2; i >= 0; --i) sum = kA4[i] + x2 * sum;
   return sum;
 }
+
+/// Below this |a| (most per-sample pieces) shorter series serve: sinc through x^6 at arguments
+/// up to 2|a| = 0.04 (first term left out 0.04^8/9! < 2e-17), u3 through y^6 (left out
+/// 6 0.04^8/11! < 1e-18 of it) and a4 through x^6 at |a| (left out < 2e-19 of it).
+inline constexpr double kShortSeriesBelow = 0.02;
 
 }  // namespace arc_poly
 
@@ -78,7 +88,13 @@ struct ArcStep {
 
   ArcStep() = default;
   explicit ArcStep(double a) : angle(a) {
-    if (std::abs(a) < kArcPolynomialBelow) {
+    if (std::abs(a) < arc_poly::kShortSeriesBelow) {
+      const double a2 = a * a;
+      sinc1 = arc_poly::sinc<3>(a2);
+      sinc_half = arc_poly::sinc<3>(0.25 * a2);
+      cos1 = 1.0 - 0.5 * a2 * sinc_half * sinc_half;
+      sin1 = a * sinc1;
+    } else if (std::abs(a) < kArcPolynomialBelow) {
       const double a2 = a * a;
       sinc1 = arc_poly::sinc(a2);
       sinc_half = arc_poly::sinc(0.25 * a2);
@@ -101,7 +117,13 @@ struct ArcFunctions : ArcStep {
   double sinc2 = 1.0, u3_1 = 1.0 / 6.0, u3_2 = 1.0 / 6.0, a4_1 = 1.0 / 20.0;
 
   explicit ArcFunctions(double a) : ArcStep(a) {
-    if (std::abs(a) < kArcPolynomialBelow) {
+    if (std::abs(a) < arc_poly::kShortSeriesBelow) {
+      const double a2 = a * a;
+      sinc2 = arc_poly::sinc<3>(4.0 * a2);
+      u3_1 = arc_poly::u3<4>(a2);
+      u3_2 = arc_poly::u3<4>(4.0 * a2);
+      a4_1 = arc_poly::a4<4>(a2);
+    } else if (std::abs(a) < kArcPolynomialBelow) {
       const double a2 = a * a;
       sinc2 = arc_poly::sinc(4.0 * a2);
       u3_1 = arc_poly::u3(a2);

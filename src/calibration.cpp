@@ -302,8 +302,9 @@ FitResult fit_exact(const Suite& suite, SuiteModel model, const std::vector<Hand
 // ---- The fast path ----------------------------------------------------------------------------
 
 /// What a run contributes to the likelihood: its residual d = error - mean, covariance S and
-/// group column u (group_variation; zero without), as one vector (d, S column by column, u).
-using RunVector = Eigen::Matrix<double, 15, 1>;
+/// group columns u, u2 (group_variation; zero without), as one vector (d, S column by column, u,
+/// u2).
+using RunVector = Eigen::Matrix<double, 18, 1>;
 
 /// Every run's residual and covariance as a quadratic in the offsets delta of the fitted values
 /// from the anchor's:
@@ -380,7 +381,8 @@ class Surrogate {
         r.mean.setZero();
         const Matrix3 S = Eigen::Map<const Matrix3>(y.data() + 3);
         r.cov = 0.5 * (S + S.transpose());
-        r.group_column = y.tail<3>();
+        r.group_column = y.segment<3>(12);
+        r.group_column2 = y.tail<3>();
         ++i;
       }
     }
@@ -396,7 +398,8 @@ class Surrogate {
     RunVector y;
     y.head<3>() = r.error - r.mean;
     y.segment<9>(3) = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(r.cov.data());
-    y.tail<3>() = r.group_column;
+    y.segment<3>(12) = r.group_column;
+    y.tail<3>() = r.group_column2;
     return y;
   }
   static std::vector<RunVector> flat(const Residuals& res) {

@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -19,23 +20,39 @@ namespace {
 
 constexpr int kDim = 3;
 
-/// group_variation's column for one run: sd times the forward difference of the systematic
-/// mean (exact for the perturbed path at any order) in the varied parameter, from `mean`, the
-/// mean at the parameter's value. A logged run passes its prediction's: on fine pieces
-/// predict_with_order's mean is predict's, bit for bit predict_mean's (on pieces it cannot
-/// coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative). The step is 1e-7
-/// of the parameter's size (at least 1e-7): truncation ~h |mu''/mu'| ~ 1e-7 of the column,
-/// rounding ~eps |mu|/(h |mu'|) far below. One mean-only propagation per run.
-Vector3 group_column(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
-                     const Robot& robot, const EffectList& effects, const GroupTarget& target,
-                     const Vector3& mean) {
-  if (!target.present || target.sd == 0.0) return Vector3::Zero();
+/// group_variation's terms for one run, to second order in the group's draw z ~ N(0, 1):
+///   f(value + sd z) = f + shift + column z + column2 q,   q = (z^2 - 1) / sqrt(2),
+/// with f the systematic mean (exact for the perturbed path at any order), shift = sd^2 f''/2
+/// (the draw's average of the curvature: a line that a drawn Ed turns by theta is shorter by
+/// d theta^2 / 6 whatever the sign), column = sd f' and column2 = sd^2 f'' / sqrt(2). q has unit
+/// variance and is uncorrelated with z, and the runs of a group share it as they share z. From
+/// the three points value and value +- h, h = sqrt(3) sd (Gauss-Hermite: the column is then
+/// E[f z] and the shift E[f] - f exactly for polynomials of degree 3 and 5), h kept within half
+/// the distance to the parameter's bounds. f at the value is `mean`: a logged run passes its
+/// prediction's (on fine pieces predict_with_order's mean is predict_mean's bit for bit; on
+/// pieces it cannot coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative),
+/// and its odometry end pose, which the shifted parameter does not change. Two mean-only
+/// propagations per run.
+struct GroupTerms {
+  Vector3 shift = Vector3::Zero(), column = Vector3::Zero(), column2 = Vector3::Zero();
+};
+
+GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
+                       const Robot& robot, const EffectList& effects, const GroupTarget& target,
+                       const Vector3& mid, const Vector3* odometry_end_pose = nullptr) {
+  if (!target.present || target.sd == 0.0) return {};
   const double value = effects[target.effect].values[target.parameter];
-  const double h = 1e-7 * std::max(1.0, std::abs(value));
+  const EffectParameterInfo& p = info_of(effects[target.effect])->parameters[target.parameter];
+  const double h = std::min({std::sqrt(3.0) * target.sd, 0.5 * (value - p.lower), 0.5 * (p.upper - value)});
   EffectList shifted = effects;
   shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict_mean(pieces, durations, robot, shifted);
-  return target.sd * (up - mean) / h;
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
+  shifted[target.effect].values[target.parameter] = value - h;
+  const Vector3 down = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
+  const double sd2_h2 = target.sd * target.sd / (h * h);  // 1/3 unless h is cut by a bound
+  const Vector3 curvature = up + down - 2.0 * mid;        // h^2 f''
+  return {0.5 * sd2_h2 * curvature, target.sd * (up - down) / (2.0 * h),
+          sd2_h2 * curvature / std::sqrt(2.0)};
 }
 
 }  // namespace
@@ -81,6 +98,13 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     }
     for (std::size_t r = 0; r < ex.runs.size(); ++r) work.emplace_back(e, r);
   }
+  // The longest logged runs first, so that no core is left with a long one at the end (the
+  // results go to their own slots: the order changes no number).
+  auto length = [&](const std::pair<std::size_t, std::size_t>& w) {
+    const SuiteExperiment& ex = suite.experiments[w.first];
+    return ex.logged ? ex.runs[w.second].pieces.size() : std::size_t{0};
+  };
+  std::stable_sort(work.begin(), work.end(), [&](const auto& a, const auto& b) { return length(a) > length(b); });
   tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
     const auto [e, r] = work[w];
     const SuiteExperiment& ex = suite.experiments[e];
@@ -89,23 +113,23 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
       const SuiteRun& run = ex.runs[r];
       const Prediction p =
           predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
-      out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean,
-                   p.cov + meas,
-                   group_column(run.pieces, run.durations_s, model.robot, model.effects, target, p.mean),
-                   group};
+      const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects,
+                                       target, p.mean, &p.odometry_end_pose);
+      out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
+                   p.cov + meas, g.column, group, g.column2};
       return;
     }
     std::vector<double> durations;
     const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
     const Prediction p = predict_with_order(pieces, durations, model.robot, model.effects, model.order);
-    const Vector3 column =
-        group_column(pieces, durations, model.robot, model.effects, target,
-                     target.present ? predict_mean(pieces, durations, model.robot, model.effects)
-                                    : Vector3::Zero());
+    const GroupTerms g =
+        group_terms(pieces, durations, model.robot, model.effects, target,
+                    target.present ? predict_mean(pieces, durations, model.robot, model.effects)
+                                   : Vector3::Zero());
     const Vector3 odometry = sampled_end_pose(ex.path, B);
     for (std::size_t i = 0; i < ex.runs.size(); ++i) {
-      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean, p.cov + meas,
-                   column, group};
+      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean + g.shift,
+                   p.cov + meas, g.column, group, g.column2};
     }
   }, tbb::simple_partitioner());
   return out;
@@ -114,26 +138,32 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
 std::vector<std::vector<RunResidual>> condition_on_groups(
     const std::vector<std::vector<RunResidual>>& res) {
   struct Posterior {
-    double m = 0.0, v = 1.0;  // of the group's standard-normal constant
+    Eigen::Vector2d m = Eigen::Vector2d::Zero();  // of the group's constants (z, q)
+    Eigen::Matrix2d v = Eigen::Matrix2d::Identity();
   };
   std::map<int, Posterior> posteriors;
   std::vector<std::vector<RunResidual>> out = res;
   for (auto& ex : out) {
     for (RunResidual& r : ex) {
-      if (r.group_column.isZero(0.0)) continue;
-      const Vector3 u = r.group_column;
+      if (r.group_column.isZero(0.0) && r.group_column2.isZero(0.0)) continue;
+      Eigen::Matrix<double, 3, 2> U;
+      U << r.group_column, r.group_column2;
       Posterior& g = posteriors[r.group];
       const Eigen::LLT<Matrix3> llt(r.cov);
-      const bool whitens = llt.info() == Eigen::Success && r.cov.allFinite() && u.allFinite();
-      r.mean += u * g.m;
+      const bool whitens = llt.info() == Eigen::Success && r.cov.allFinite() && U.allFinite();
+      r.mean += U * g.m;
       const Vector3 residual = r.error - r.mean;
-      r.cov += g.v * u * u.transpose();
+      r.cov += U * g.v * U.transpose();
       r.group_column.setZero();
+      r.group_column2.setZero();
       if (!whitens || !residual.allFinite()) continue;  // compare calls such a run untestable
-      const Vector3 a = llt.matrixL().solve(u), b = llt.matrixL().solve(residual);
-      const double gain = g.v / (1.0 + g.v * a.squaredNorm());
-      g.m += gain * a.dot(b);
-      g.v = gain;
+      const Eigen::Matrix<double, 3, 2> A = llt.matrixL().solve(U);
+      const Vector3 b = llt.matrixL().solve(residual);
+      // (v^-1 + A'A)^-1 = (I + v A'A)^-1 v: the 2x2 Woodbury step (rank one: the scalar gain).
+      const Eigen::Matrix2d gain =
+          (Eigen::Matrix2d::Identity() + g.v * A.transpose() * A).partialPivLu().solve(g.v);
+      g.m += gain * (A.transpose() * b);
+      g.v = 0.5 * (gain + gain.transpose());
     }
   }
   return out;
@@ -143,8 +173,10 @@ std::vector<std::vector<RunResidual>> marginal(const std::vector<std::vector<Run
   std::vector<std::vector<RunResidual>> out = res;
   for (auto& ex : out) {
     for (RunResidual& r : ex) {
-      r.cov += r.group_column * r.group_column.transpose();
+      r.cov += r.group_column * r.group_column.transpose() +
+               r.group_column2 * r.group_column2.transpose();
       r.group_column.setZero();
+      r.group_column2.setZero();
     }
   }
   return out;

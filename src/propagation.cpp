@@ -299,10 +299,12 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
 }  // namespace
 
 Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                     const Robot& robot, const EffectList& effect_list) {
+                     const Robot& robot, const EffectList& effect_list,
+                     const Vector3* odometry_end_pose) {
   // resolve's pieces, streamed: only their true arcs (the same arithmetic), nothing stored.
   auto active = effects::instantiate(effect_list);
   const double B = robot.wheelbase_m;
+  const bool odometry_given = odometry_end_pose != nullptr;
   PoseWalker true_pose, odometry;
   effects::for_each_piece(pieces, durations_s, B, active,
                           [&](const ArcSegment& encoder, const effects::Motion&,
@@ -311,6 +313,7 @@ Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<do
     const double center = travel.center_m(), angle = travel.heading_change_rad(sys.wheelbase_factor * B);
     const detail::ArcStep f(angle);
     true_pose.step(center, f);
+    if (odometry_given) return;
     const double d_odometry = encoder.center_m(), a_odometry = encoder.heading_change_rad(B);
     if (d_odometry == center && a_odometry == angle) {
       odometry.step(center, f);
@@ -323,7 +326,7 @@ Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<do
   Vector3 measured = true_pose.pose();
   Matrix3 unused = Matrix3::Zero();
   hooks.measure(measured, unused);
-  return pose_error(measured, odometry.pose());
+  return pose_error(measured, odometry_given ? *odometry_end_pose : odometry.pose());
 }
 
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,

@@ -18,6 +18,7 @@
 #include "odomcov/diagnosis.hpp"
 #include "odomcov/error.hpp"
 #include "odomcov/likelihood.hpp"
+#include "odomcov/propagation.hpp"
 #include "odomcov/world.hpp"
 
 namespace odomcov {
@@ -65,7 +66,8 @@ EffectList without_group_variation(const EffectList& list) {
 }
 
 /// The joint Gaussian log-density of every run, built densely: one (3n x 3n) covariance with
-/// blockdiag(cov_i) + u_i u_j^T for runs i, j of one group, factorised by Eigen's LLT.
+/// blockdiag(cov_i) + u_i u_j^T + u2_i u2_j^T for runs i, j of one group, factorised by Eigen's
+/// LLT.
 double dense_log_likelihood(const std::vector<std::vector<RunResidual>>& res) {
   std::vector<RunResidual> runs;
   for (const auto& ex : res) runs.insert(runs.end(), ex.begin(), ex.end());
@@ -79,7 +81,8 @@ double dense_log_likelihood(const std::vector<std::vector<RunResidual>>& res) {
     for (std::size_t j = 0; j < runs.size(); ++j) {
       if (runs[i].group != runs[j].group) continue;
       S.block<3, 3>(a, static_cast<Eigen::Index>(3 * j)) +=
-          runs[i].group_column * runs[j].group_column.transpose();
+          runs[i].group_column * runs[j].group_column.transpose() +
+          runs[i].group_column2 * runs[j].group_column2.transpose();
     }
   }
   const Eigen::LLT<Eigen::MatrixXd> llt(S);
@@ -90,7 +93,8 @@ double dense_log_likelihood(const std::vector<std::vector<RunResidual>>& res) {
 
 TEST(GroupLikelihood, MatchesTheDenseEvaluation) {
   // Random residuals: 3 experiments, groups shared across experiments, random SPD covariances
-  // and group columns of the size of the covariances' square roots (a strong correlation).
+  // and group columns of the size of the covariances' square roots (a strong correlation); in
+  // the odd trials also second group columns (rank two).
   std::mt19937_64 rng(4242);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int trial = 0; trial < 20; ++trial) {
@@ -104,6 +108,7 @@ TEST(GroupLikelihood, MatchesTheDenseEvaluation) {
         r.mean = Vector3(u(rng), u(rng), u(rng)) * 0.01;
         r.error = r.mean + Vector3(u(rng), u(rng), u(rng)) * 0.02;
         r.group_column = Vector3(u(rng), u(rng), u(rng)) * 0.01;
+        if (trial % 2 == 1) r.group_column2 = Vector3(u(rng), u(rng), u(rng)) * 0.01;
         r.group = static_cast<int>((e + static_cast<std::size_t>(i)) % 2);  // 2 groups across experiments
         res[e].push_back(r);
       }
@@ -117,6 +122,7 @@ TEST(GroupLikelihood, MatchesTheDenseEvaluation) {
     for (auto& ex : plain) {
       for (RunResidual& r : ex) {
         r.group_column.setZero();
+        r.group_column2.setZero();
         sum += gaussian_log_density(r.error, r.mean, r.cov);
       }
     }
@@ -222,9 +228,53 @@ TEST(GroupWorld, FitFindsTheSpreadAndAHeldOutGroupIsPredictedWithIt) {
   // Each held-out run on its own: its covariance includes the spread (marginal).
   const auto res = residuals(held_out, f.model);
   const auto own = marginal(res);
-  const Vector3 u = res[0][0].group_column;
+  const Vector3 u = res[0][0].group_column, u2 = res[0][0].group_column2;
   EXPECT_GT(u.norm(), 0.0);
-  EXPECT_LT((own[0][0].cov - res[0][0].cov - u * u.transpose()).norm(), 1e-15);
+  EXPECT_LT((own[0][0].cov - res[0][0].cov - u * u.transpose() - u2 * u2.transpose()).norm(), 1e-15);
+}
+
+TEST(GroupLikelihood, TheGroupTermsAreTheDrawsMoments) {
+  // Each run's group terms against the moments of its systematic mean f(Eb + sd z) over the draw
+  // z ~ N(0, 1), by the trapezoid rule on z in [-8, 8] (step 0.05; spectrally accurate for this
+  // smooth, Gaussian-weighted integrand): the mean's shift E[f] - f(Eb), the column E[f z] and
+  // the second column E[f (z^2 - 1)] / sqrt(2). sd = 0.02 (five times the world's) makes the
+  // curvature visible. Three points (Eb, Eb +- sqrt(3) sd) give the shift and the column to
+  // O(sd^6 f^(6)) and O(sd^5 f^(5)), the second column to O(sd^4 f^(4)): relative errors of order
+  // (sd / Eb)^2 = 4e-4 times the derivatives' growth, bounded here by 1e-3 and 2e-2.
+  const WorldFile w = load_world(kWorld);
+  const Suite suite = synth_suite(w, "odomcov_group_moments", {"day1"});
+  const double eb = 1.01, sd = 0.02;
+  SuiteModel model = world_model(w, {{"wheelbase_error", {eb}}, {kGroupVariation, {sd}, "wheelbase_error.Eb"}});
+  SuiteModel flat = model;
+  flat.effects[1].values[0] = 0.0;
+  const auto res = residuals(suite, model), res0 = residuals(suite, flat);
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+    std::vector<double> durations;
+    const std::vector<ArcSegment> pieces = model_pieces(suite.experiments[e].path, w.robot.wheelbase_m, &durations);
+    auto f = [&](double value) {
+      return predict(pieces, durations, model.robot, {{"wheelbase_error", {value}}}).mean;
+    };
+    const Vector3 f0 = f(eb);
+    Vector3 shift = Vector3::Zero(), column = Vector3::Zero(), column2 = Vector3::Zero();
+    const double step = 0.05;
+    for (int k = -160; k <= 160; ++k) {
+      const double z = k * step, weight = step * std::exp(-0.5 * z * z) / std::sqrt(2.0 * M_PI);
+      const Vector3 fz = f(eb + sd * z) - f0;
+      shift += weight * fz;
+      column += weight * z * fz;
+      column2 += weight * (z * z - 1.0) / std::sqrt(2.0) * fz;
+    }
+    const RunResidual& r = res[e][0];
+    std::printf("%s: shift %.3g, column %.3g, column2 %.3g (relative errors %.2g %.2g %.2g)\n",
+                suite.experiments[e].name.c_str(), shift.norm(), column.norm(), column2.norm(),
+                (r.mean - res0[e][0].mean - shift).norm() / shift.norm(),
+                (r.group_column - column).norm() / column.norm(),
+                (r.group_column2 - column2).norm() / column2.norm());
+    EXPECT_LT((r.mean - res0[e][0].mean - shift).norm(), 1e-3 * shift.norm()) << suite.experiments[e].name;
+    EXPECT_LT((r.group_column - column).norm(), 1e-3 * column.norm()) << suite.experiments[e].name;
+    EXPECT_LT((r.group_column2 - column2).norm(), 2e-2 * column2.norm()) << suite.experiments[e].name;
+    EXPECT_TRUE(res0[e][0].group_column.isZero(0.0) && res0[e][0].group_column2.isZero(0.0));
+  }
 }
 
 TEST(GroupDiagnose, NamesTheGroupVariationAndOnlyWhenThereIsOne) {

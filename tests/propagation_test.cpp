@@ -252,9 +252,13 @@ TEST(Propagation, PredictMeanIsPredictsMeanBitForBit) {
       {{"turn_dependent_wheelbase", {1.01, 1.03}}, {"reference_offset", {0.01, -0.02}}},
   };
   for (const EffectList& effects : models) {
-    const Vector3 full = predict(pieces, durations, robot, effects).mean;
+    const Prediction p = predict(pieces, durations, robot, effects);
     const Vector3 alone = predict_mean(pieces, durations, robot, effects);
-    for (int k = 0; k < 3; ++k) EXPECT_EQ(alone(k), full(k)) << effects.size() << " " << k;
+    const Vector3 given = predict_mean(pieces, durations, robot, effects, &p.odometry_end_pose);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(alone(k), p.mean(k)) << effects.size() << " " << k;
+      EXPECT_EQ(given(k), p.mean(k)) << effects.size() << " " << k;
+    }
   }
 }
 

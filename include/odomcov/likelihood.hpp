@@ -15,18 +15,22 @@ namespace odomcov {
 /// coarsened pieces). The predicted mean is the systematic mean plus the noise-induced mean.
 ///
 /// Grouped runs (group_variation, the one effect that correlates runs): the runs of one group
-/// share a standard-normal constant z_g, and run i's error is
-///   e_i = mean_i + group_column_i z_g + w_i,   w_i ~ N(0, cov_i) independent,
-/// so a group's runs have the joint covariance blockdiag(cov_i) + U U^T, U the stacked columns
-/// (rank one). group_column is sd times the first-order sensitivity of the run's predicted mean
-/// to the varied parameter (a forward difference of the systematic mean); it is zero without
-/// group_variation, and then the runs are independent.
+/// share a draw z_g ~ N(0, 1) of the varied parameter, value + sd z_g, and run i's error is, to
+/// second order in the draw,
+///   e_i = mean_i + group_column_i z_g + group_column2_i q_g + w_i,   w_i ~ N(0, cov_i),
+/// with q_g = (z_g^2 - 1) / sqrt(2) (unit variance, uncorrelated with z_g), taken as Gaussian:
+/// a group's runs have the joint covariance blockdiag(cov_i) + U U^T, U the stacked [columns]
+/// (rank two). group_column is sd times the sensitivity of the run's systematic mean to the
+/// varied parameter, group_column2 sd^2/sqrt(2) times its curvature, and mean includes the
+/// draw's average sd^2/2 times the curvature (Gauss-Hermite points value, value +- sqrt(3) sd).
+/// Both are zero without group_variation, and then the runs are independent.
 struct RunResidual {
   Vector3 error = Vector3::Zero();
   Vector3 mean = Vector3::Zero();
   Matrix3 cov = Matrix3::Zero();
   Vector3 group_column = Vector3::Zero();
   int group = -1;  // index of the run's group (group_key) in order of first appearance
+  Vector3 group_column2 = Vector3::Zero();
 };
 
 /// Residuals of every run of every experiment (runs with logs are predicted one by one, in
@@ -40,20 +44,21 @@ std::string second_order_problem(const Suite& suite, int order);
 
 /// The grouped likelihood in its sequential form (the chain rule over each group's runs, in
 /// suite order): each run's predictive distribution given the earlier runs of its group. For a
-/// group with z_g ~ N(m, v) after the earlier runs, run i is predicted as
-///   N(mean_i + u_i m, cov_i + v u_i u_i^T),
-/// then (m, v) are updated with the run's residual r_i = e_i - mean_i - u_i m by
-/// Sherman-Morrison: with a = u^T cov^-1 u and b = u^T cov^-1 r,
-///   m += v b / (1 + v a),  v /= 1 + v a.
+/// group with (z_g, q_g) ~ N(m, V) after the earlier runs (m 2-vector, V 2x2), with
+/// U_i = [group_column_i group_column2_i], run i is predicted as
+///   N(mean_i + U_i m, cov_i + U_i V U_i^T),
+/// then (m, V) are updated with the run's residual r_i = e_i - mean_i - U_i m by Woodbury:
+/// with A = U^T cov^-1 U (2x2) and b = U^T cov^-1 r,
+///   V <- (I + V A)^-1 V,  m += V b  (the new V; with one column, Sherman-Morrison's scalars).
 /// The result has zero group columns and independent runs: summing its runs' Gaussian
 /// log-densities gives the joint log-likelihood of every group exactly (the matrix determinant
-/// lemma: ln det(cov + v u u^T) = ln det cov + ln(1 + v a)) in O(runs), and whitening each run
+/// lemma: ln det(cov + U V U^T) = ln det cov + ln det(I + V A)) in O(runs), and whitening each run
 /// by its own covariance whitens the groups jointly (block Cholesky), which is how compare
 /// tests grouped runs. Without group columns the residuals come back unchanged.
 std::vector<std::vector<RunResidual>> condition_on_groups(
     const std::vector<std::vector<RunResidual>>& residuals);
 
-/// Each run's prediction on its own, the between-group spread included: cov_i + u_i u_i^T (a
+/// Each run's prediction on its own, the between-group spread included: cov_i + U_i U_i^T (a
 /// run of a held-out group, of which no run has been seen). Zero group columns.
 std::vector<std::vector<RunResidual>> marginal(const std::vector<std::vector<RunResidual>>& residuals);
 

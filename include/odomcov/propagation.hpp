@@ -80,8 +80,12 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
 
 /// predict(...).mean alone, by the same arithmetic (bit for bit), without the covariance and
 /// the noise-induced mean: for derivatives of the systematic mean (group_variation's column).
+/// The odometry depends on the encoders and the nominal wheelbase only: `odometry_end_pose`,
+/// when given (predict's odometry_end_pose for the same pieces and robot), is used instead of
+/// integrating it again.
 Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                     const Robot& robot, const EffectList& effects);
+                     const Robot& robot, const EffectList& effects,
+                     const Vector3* odometry_end_pose = nullptr);
 
 /// The engine's prediction after every piece, for covariance along a trajectory (an encoder
 /// log, one piece per sample): element 0 is the start (all zero), element i the state after

@@ -154,7 +154,8 @@ class Effect {
     (void)motion, (void)factors;
   }
   /// Model side, for history effects: the fraction in (0, 1] of this piece after which the
-  /// factors change (backlash: where the play is taken up); resolve splits the piece there.
+  /// factors change (backlash: where the play is taken up); resolve splits the piece there. Only
+  /// effects whose dependence() is `history` are asked.
   virtual double split_at(const Motion& motion) const {
     (void)motion;
     return 1.0;

@@ -3,9 +3,10 @@
 // N(value, sd^2) and shared by every run of that group (tyre pressure, floor, a re-mounted
 // marker). One run alone cannot see it: the effect has no per-run hooks on either side.
 //  * World side: group_effects() draws the group's value (synth calls it per experiment).
-//  * Model side: likelihood.cpp gives each run the column sd * d(mean)/d(value) of the group's
-//    shared standard-normal constant (group_column), and the runs of a group are correlated
-//    through it.
+//  * Model side: likelihood.cpp (group_terms) expands each run's mean to second order in the
+//    group's draw: the shift sd^2 f''/2, and the columns sd f' and sd^2 f''/sqrt(2) of the
+//    group's shared constants z and (z^2 - 1)/sqrt(2); the runs of a group are correlated
+//    through them.
 #include <cstdint>
 
 #include "effect.hpp"
