@@ -58,7 +58,7 @@ Array stack3(std::size_t n, Get get) {
 }
 
 py::dict predict_py(const Array& left, const Array& right, double wheelbase, double k_left,
-                    double k_right, const py::object& effects) {
+                    double k_right, const py::object& effects, const py::object& t) {
   if (left.ndim() != 1 || right.ndim() != 1 || left.size() != right.size() || left.size() < 1) {
     throw py::value_error("left and right must be 1-D arrays of the same length >= 1");
   }
@@ -72,6 +72,17 @@ py::dict predict_py(const Array& left, const Array& right, double wheelbase, dou
   for (std::size_t i = 1; i < n; ++i) {
     const auto j = static_cast<py::ssize_t>(i);
     pieces.push_back({l(j) - l(j - 1), r(j) - r(j - 1)});
+  }
+  // Each piece's duration from the sample times, when given (speed- and time-dependent effects).
+  std::vector<double> durations;
+  if (!t.is_none()) {
+    const Array times = t.cast<Array>();
+    if (times.ndim() != 1 || times.size() != left.size()) throw py::value_error("t must be a 1-D array as long as left");
+    const auto ts = times.unchecked<1>();
+    for (py::ssize_t j = 1; j < times.size(); ++j) {
+      if (!(ts(j) > ts(j - 1))) throw py::value_error("t must increase strictly (t[" + std::to_string(j) + "])");
+      durations.push_back(ts(j) - ts(j - 1));
+    }
   }
   const Robot robot{wheelbase, {k_left, k_right}};
   const EffectList list = effects_from_python(effects);
@@ -89,7 +100,7 @@ py::dict predict_py(const Array& left, const Array& right, double wheelbase, dou
     out["cov"] = stack3x3(n, [&](std::size_t i) { return cov[i]; });
     out["mean"] = stack3(n, [](std::size_t) { return Vector3::Zero().eval(); });
   } else {  // the propagation engine with the model's effects
-    const std::vector<Prediction> p = predict_trajectory(pieces, robot, list);
+    const std::vector<Prediction> p = predict_trajectory(pieces, durations, robot, list);
     out["pose"] = stack3(n, [&](std::size_t i) { return p[i].odometry_end_pose; });
     out["cov"] = stack3x3(n, [&](std::size_t i) { return p[i].cov; });  // exactly symmetric
     out["mean"] = stack3(n, [&](std::size_t i) { return p[i].mean; });
@@ -298,12 +309,14 @@ PYBIND11_MODULE(_odomcov, m) {
   py::register_exception<InputError>(m, "InputError", PyExc_ValueError);
 
   m.def("predict", &predict_py, py::arg("left"), py::arg("right"), py::arg("wheelbase"),
-        py::arg("k_left"), py::arg("k_right"), py::arg("effects") = py::none(),
+        py::arg("k_left"), py::arg("k_right"), py::arg("effects") = py::none(), py::arg("t") = py::none(),
         R"(Pose and first-order covariance along an encoder log.
 
 left, right: cumulative wheel travel [m] per sample, arrays of length N starting at 0.
 wheelbase [m], k_left, k_right [m^(1/2)]: the robot. effects: optional model effects, as a
 config's effects list: [{"wheel_diameter_ratio": {"Ed": 1.004}}, {"custom": {...}}, ...].
+t: optional sample times [s], length N, strictly increasing: effects that depend on the speed
+(v) or the time (t) need them.
 Returns {"pose": (N, 3) odometry poses (x, y, theta) in the start frame, "cov": (N, 3, 3)
 covariance of the error true - odometry in the start (world) frame, "mean": (N, 3) the
 effects' systematic mean error}. Without effects this is the closed form [Kleeman95] per

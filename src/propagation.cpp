@@ -339,11 +339,12 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<doub
 }
 
 std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,
+                                           const std::vector<double>& durations_s,
                                            const Robot& robot, const EffectList& effect_list) {
   std::vector<Prediction> out;
   out.reserve(pieces.size() + 1);
   out.emplace_back();  // the start: exactly known
-  propagate(pieces, {}, robot, effect_list, [&out](const Prediction& p) { out.push_back(p); });
+  propagate(pieces, durations_s, robot, effect_list, [&out](const Prediction& p) { out.push_back(p); });
   return out;
 }
 

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "odomcov/config.hpp"
+#include "odomcov/error.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {
@@ -260,6 +261,23 @@ TEST(Propagation, PredictMeanIsPredictsMeanBitForBit) {
       EXPECT_EQ(given(k), p.mean(k)) << effects.size() << " " << k;
     }
   }
+}
+
+TEST(Propagation, TrajectoryTakesThePiecesDurations) {
+  // predict_trajectory sees each piece's duration, as predict does: with a speed-dependent
+  // custom effect (configs/effects/speed_scale.yaml's world) its last element is predict's
+  // prediction bit for bit, and the effect moves the mean, which it cannot do without times
+  // (the speed is unknown: the expression is not finite, an InputError naming it).
+  const Config c = load_config(ODOMCOV_SOURCE_DIR "/configs/effects/speed_scale.yaml");
+  std::vector<double> durations;
+  const std::vector<ArcSegment> pieces = model_pieces(c.path, c.robot.wheelbase_m, &durations);
+  const std::vector<Prediction> along = predict_trajectory(pieces, durations, c.robot, c.world.effects);
+  const Prediction end = predict(pieces, durations, c.robot, c.world.effects);
+  ASSERT_EQ(along.size(), pieces.size() + 1);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(along.back().mean(k), end.mean(k)) << k;
+  EXPECT_EQ(along.back().cov, end.cov);
+  EXPECT_GT(end.mean.head<2>().norm(), 1e-3);
+  EXPECT_THROW(predict_trajectory(pieces, {}, c.robot, c.world.effects), InputError);
 }
 
 }  // namespace

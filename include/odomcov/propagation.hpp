@@ -89,8 +89,10 @@ Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<do
 
 /// The engine's prediction after every piece, for covariance along a trajectory (an encoder
 /// log, one piece per sample): element 0 is the start (all zero), element i the state after
-/// pieces[0 .. i-1]. Same frames and conventions as predict().
+/// pieces[0 .. i-1]. Same frames and conventions as predict(); `durations_s` as there (each
+/// piece's duration, for effects that depend on speed or time; empty when unknown).
 std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,
+                                           const std::vector<double>& durations_s,
                                            const Robot& robot, const EffectList& effects);
 
 /// The pieces the engine uses for a keyframe path: each interval cut so that no piece turns

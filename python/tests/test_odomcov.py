@@ -72,6 +72,22 @@ def test_predict_takes_every_effect_the_configs_take():
                         effects=[{"custom": {"name": "x", "parameters": [1], "scale": "1"}}])
 
 
+def test_predict_takes_sample_times_for_speed_effects():
+    # A speed-dependent scale needs each sample's duration: without t the speed is unknown and
+    # the expression is not finite (ValueError); with t the slow and the fast halves differ.
+    t = np.linspace(0, 10, 501)
+    left = right = np.where(t < 5, 0.1 * t, 0.5 + 0.5 * (t - 5))  # 0.1 m/s, then 0.5 m/s
+    speed = [{"custom": {"name": "speed_scale", "parameters": {"a": 0.02}, "scale": "1 + a * (v - 0.1)"}}]
+    with pytest.raises(ValueError, match="nan"):
+        odomcov.predict(left, right, 0.5, 1e-3, 1e-3, effects=speed)
+    out = odomcov.predict(left, right, 0.5, 1e-3, 1e-3, effects=speed, t=t)
+    # the scale is 1 at 0.1 m/s and 1.008 at 0.5 m/s over the 2.5 m of the second half
+    assert out["mean"][250, 0] == pytest.approx(0.0, abs=1e-12)
+    assert out["mean"][-1, 0] == pytest.approx(0.008 * 2.5, rel=1e-9)
+    with pytest.raises(ValueError, match="increase"):
+        odomcov.predict(left, right, 0.5, 1e-3, 1e-3, effects=speed, t=t[::-1])
+
+
 def test_step_api():
     odo = odomcov.OdometryCovariance(0.5, 1e-3, 2e-3)
     s = odo.step(1.0, 1.2)

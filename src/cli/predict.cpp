@@ -80,8 +80,10 @@ int run_predict(const PredictOptions& opt) {
   const EncoderLog log = load_encoder_log(opt.log, opt.left_scale, opt.right_scale);
   const std::size_t n = log.t_s.size();
   std::vector<ArcSegment> pieces;
+  std::vector<double> durations;  // from the log's t column: speed- and time-dependent effects
   for (std::size_t i = 1; i < n; ++i) {
     pieces.push_back({log.left_m[i] - log.left_m[i - 1], log.right_m[i] - log.right_m[i - 1]});
+    durations.push_back(log.t_s[i] - log.t_s[i - 1]);
   }
   std::vector<Vector3> pose(n, Vector3::Zero()), mean(n, Vector3::Zero());
   std::vector<Matrix3> cov(n, Matrix3::Zero());
@@ -93,7 +95,7 @@ int run_predict(const PredictOptions& opt) {
       cov[i] = s.P_world;
     }
   } else {
-    const std::vector<Prediction> p = predict_trajectory(pieces, robot, effects);
+    const std::vector<Prediction> p = predict_trajectory(pieces, durations, robot, effects);
     for (std::size_t i = 0; i < n; ++i) {
       pose[i] = p[i].odometry_end_pose;
       cov[i] = p[i].cov;
