@@ -45,8 +45,8 @@ struct Sums {
   }
 };
 
-/// A run's encoder pieces and their durations: the logged rows, or the sampled path's arcs (one
-/// per run of equal samples, as sample_arcs).
+/// The durations of a run's encoder pieces (encoder_pieces): the logged rows', or those of the
+/// sampled path's arcs (one per run of equal samples, as sample_arcs).
 std::vector<double> piece_durations(const SuiteExperiment& ex, const SuiteRun& run) {
   if (ex.logged) return run.durations_s;
   std::vector<double> out;
@@ -72,7 +72,6 @@ bool same(const CorrectedParameters& a, const CorrectedParameters& b) {
 
 std::optional<OdometryCorrection> odometry_correction(const Suite& suite, const SuiteModel& model) {
   const double B = model.robot.wheelbase_m;
-  // Only the systematic part: the model's white noise plays no role in the factors.
   std::vector<std::string> order;
   std::map<std::string, CorrectionByKind> kinds;
   std::map<std::string, Sums> sums;
@@ -90,9 +89,8 @@ std::optional<OdometryCorrection> odometry_correction(const Suite& suite, const 
       for (const ArcSegment& p : pieces) nominal = drive(nominal, p, B);
       for (const effects::ResolvedPiece& p : path.pieces) {
         sums[kind].add(p);
-        const ArcSegment travel = p.encoder;
-        changes = changes || p.wheelbase_true_m != B || p.center_m != travel.center_m() ||
-                  p.angle_rad != travel.heading_change_rad(B);
+        changes = changes || p.wheelbase_true_m != B || p.center_m != p.encoder.center_m() ||
+                  p.angle_rad != p.encoder.heading_change_rad(B);
       }
       const Eigen::Vector2d before = pose_error(run.measured, nominal).head<2>();
       const Eigen::Vector2d after = pose_error(run.measured, true_end_pose(path)).head<2>();
