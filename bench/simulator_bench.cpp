@@ -17,12 +17,11 @@ const odomcov::Config& table3() {
   return config;
 }
 
-void BM_SimulatorTable3(benchmark::State& state) {
-  const odomcov::Config& c = table3();
-  const odomcov::Simulator sim(c.robot, c.path);
-  const int threads = static_cast<int>(state.range(0));
-  const std::int64_t runs = 8192;
-  sim.simulate(runs, 1, threads);  // warm the thread pool
+/// Times `runs` runs per iteration on `threads` threads (one untimed batch first warms the
+/// thread pool) and reports the wheel-sample steps per second and the thread count.
+void time_simulation(benchmark::State& state, const odomcov::Simulator& sim, std::int64_t runs,
+                     int threads) {
+  sim.simulate(runs, 1, threads);
   std::uint64_t seed = 1;
   for (auto _ : state) {
     benchmark::DoNotOptimize(sim.simulate(runs, seed++, threads).mean());
@@ -31,6 +30,14 @@ void BM_SimulatorTable3(benchmark::State& state) {
   state.counters["steps/s"] =
       benchmark::Counter(steps, benchmark::Counter::kIsIterationInvariantRate);
   state.counters["threads"] = threads;
+}
+
+void BM_SimulatorTable3(benchmark::State& state) {
+  const odomcov::Config& c = table3();
+  const odomcov::Simulator sim(c.robot, c.path);
+  const int threads = static_cast<int>(state.range(0));
+  const std::int64_t runs = 8192;
+  time_simulation(state, sim, runs, threads);
   state.SetLabel(odomcov::Simulator::kernel_isa());
 }
 
@@ -49,14 +56,7 @@ void BM_SimulatorGeneral(benchmark::State& state) {
   const odomcov::EffectList effects{{"turn_slip", {0.0015}}, {"wheel_noise_correlation", {0.3}}};
   const odomcov::Simulator sim(c.world_robot(), c.path, effects);
   const std::int64_t runs = 2048;
-  std::uint64_t seed = 1;
-  for (auto _ : state) {
-    benchmark::DoNotOptimize(sim.simulate(runs, seed++, 1).mean());
-  }
-  const double steps = static_cast<double>(runs * sim.samples_per_run());
-  state.counters["steps/s"] =
-      benchmark::Counter(steps, benchmark::Counter::kIsIterationInvariantRate);
-  state.counters["threads"] = 1;
+  time_simulation(state, sim, runs, 1);
   state.SetLabel("general kernel");
 }
 
@@ -83,15 +83,7 @@ void BM_SimulatorCustom(benchmark::State& state) {
   const odomcov::Simulator sim(c.world_robot(), c.path, custom_variant(static_cast<int>(state.range(0))));
   const int threads = static_cast<int>(std::thread::hardware_concurrency());
   const std::int64_t runs = 2048;
-  sim.simulate(runs, 1, threads);  // warm the thread pool
-  std::uint64_t seed = 1;
-  for (auto _ : state) {
-    benchmark::DoNotOptimize(sim.simulate(runs, seed++, threads).mean());
-  }
-  const double steps = static_cast<double>(runs * sim.samples_per_run());
-  state.counters["steps/s"] =
-      benchmark::Counter(steps, benchmark::Counter::kIsIterationInvariantRate);
-  state.counters["threads"] = threads;
+  time_simulation(state, sim, runs, threads);
   state.SetLabel(state.range(0) == 0 ? "no effect" : state.range(0) == 1 ? "custom, speed" : "custom, distance");
 }
 
