@@ -19,9 +19,10 @@
 #include <fstream>
 #include <unistd.h>
 
-#include "odomcov/calibration.hpp"
-#include "odomcov/diagnosis.hpp"
-#include "odomcov/optiodom.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/diagnosis.hpp"
+#include "odomcov/io/optiodom.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 namespace {
 

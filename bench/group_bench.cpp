@@ -15,8 +15,9 @@
 #include <fstream>
 #include <random>
 
-#include "odomcov/likelihood.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/measurement/likelihood.hpp"
+#include "odomcov/io/world.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 namespace {
 

@@ -6,8 +6,9 @@
 // Run: cmake --build build --target bench
 #include <benchmark/benchmark.h>
 
-#include "odomcov/config.hpp"
-#include "odomcov/second_order.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/engine/second_order.hpp"
+#include "odomcov/io/config_io.hpp"
 
 namespace {
 

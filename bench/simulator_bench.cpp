@@ -5,9 +5,10 @@
 
 #include <thread>
 
-#include "odomcov/config.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/simulator.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/engine/simulator.hpp"
+#include "odomcov/io/config_io.hpp"
 
 namespace {
 

@@ -5,17 +5,19 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include "odomcov/calibration.hpp"
-#include "odomcov/comparison.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/diagnosis.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/odometry_covariance.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/simulator.hpp"
-#include "odomcov/statistics.hpp"
-#include "odomcov/suite.hpp"
-#include "odomcov/validation.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/measurement/diagnosis.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/closed_form/odometry_covariance.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/engine/simulator.hpp"
+#include "odomcov/engine/statistics.hpp"
+#include "odomcov/measurement/suite.hpp"
+#include "odomcov/measurement/validation.hpp"
+#include "odomcov/io/config_io.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "failures.hpp"  // src/cli: the failures in words
 
 namespace py = pybind11;

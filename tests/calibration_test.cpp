@@ -1,6 +1,6 @@
 // compare, fit and UMBmark on synthesised suites whose truth is known.
-#include "odomcov/calibration.hpp"
-#include "odomcov/comparison.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/comparison.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,8 +10,9 @@
 #include <filesystem>
 #include <fstream>
 
-#include "odomcov/error.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/io/world.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

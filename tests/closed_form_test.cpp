@@ -1,7 +1,7 @@
 // The closed-form arc covariance against: the paper's own formulas (line, turn, eq. (41) with its
 // errata), an independent numerical quadrature of eq. (40), and first-order perturbation checks
 // of Phi and of the input gain. Consistency (splitting a path) is in propagation_test.cpp.
-#include "odomcov/closed_form.hpp"
+#include "odomcov/closed_form/closed_form.hpp"
 
 #include <gtest/gtest.h>
 
@@ -11,8 +11,8 @@
 #include <limits>
 #include <random>
 
-#include "odomcov/path.hpp"
-#include "quadrature.hpp"
+#include "odomcov/closed_form/path.hpp"
+#include "base/quadrature.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

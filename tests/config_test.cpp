@@ -1,6 +1,6 @@
 // Library-level config parsing; the bad-input contract (exit code 2, one line, no output) is
 // tested through the CLI in CMakeLists.txt.
-#include "odomcov/config.hpp"
+#include "odomcov/measurement/config.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,8 @@
 #include <filesystem>
 #include <fstream>
 
-#include "odomcov/error.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/io/config_io.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

@@ -1,7 +1,7 @@
 // `import csv` on logs constructed from a known path: the reference given in a rotated and
 // translated world frame, the wheels in encoder ticks. After the import, each run's measured end
 // pose must be the known start-frame pose, so its error against the odometry is zero.
-#include "odomcov/csv_import.hpp"
+#include "odomcov/io/csv_import.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -9,10 +9,11 @@
 #include <filesystem>
 #include <fstream>
 
-#include "odomcov/error.hpp"
+#include "odomcov/base/error.hpp"
 #include "test_util.hpp"
-#include "odomcov/format.hpp"
-#include "odomcov/suite.hpp"
+#include "odomcov/base/format.hpp"
+#include "odomcov/measurement/suite.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 namespace odomcov {
 namespace {

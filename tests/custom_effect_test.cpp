@@ -8,15 +8,17 @@
 #include <filesystem>
 #include <fstream>
 
-#include "odomcov/calibration.hpp"
-#include "odomcov/comparison.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/second_order.hpp"
-#include "odomcov/suite_writer.hpp"
-#include "odomcov/validation.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/engine/second_order.hpp"
+#include "odomcov/io/suite_writer.hpp"
+#include "odomcov/measurement/validation.hpp"
+#include "odomcov/io/world.hpp"
+#include "odomcov/io/config_io.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 namespace odomcov {
 namespace {

@@ -7,12 +7,13 @@
 #include <cstdio>
 #include <random>
 
-#include "odomcov/config.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/simulator.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/engine/simulator.hpp"
 #include "effects/effect.hpp"
-#include "odomcov/validation.hpp"
+#include "odomcov/measurement/validation.hpp"
+#include "odomcov/io/config_io.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

@@ -16,10 +16,11 @@
 #include <fstream>
 #include <unistd.h>
 
-#include "odomcov/calibration.hpp"
-#include "odomcov/diagnosis.hpp"
-#include "odomcov/optiodom.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/diagnosis.hpp"
+#include "odomcov/io/optiodom.hpp"
+#include "odomcov/io/world.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 namespace odomcov {
 namespace {

@@ -13,13 +13,14 @@
 
 #include <tbb/task_arena.h>
 
-#include "odomcov/calibration.hpp"
-#include "odomcov/comparison.hpp"
-#include "odomcov/diagnosis.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/likelihood.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/measurement/diagnosis.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/measurement/likelihood.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/io/world.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 namespace odomcov {
 namespace {

@@ -7,7 +7,8 @@ build=$1 source=$2 work=$3
 rm -rf "$work"
 mkdir -p "$work"
 cmake --install "$build" --prefix "$work/prefix" > "$work/install.log"
-test -f "$work/prefix/include/odomcov/odometry_covariance.hpp"
+test -f "$work/prefix/include/odomcov/closed_form/odometry_covariance.hpp"
+test -f "$work/prefix/include/odomcov/odometry_covariance.hpp"  # the forwarding header (docs/library.md)
 test -f "$work/prefix/lib/cmake/odomcov/odomcovConfigVersion.cmake" || \
   test -f "$work/prefix/lib/"*/cmake/odomcov/odomcovConfigVersion.cmake
 cmake -S "$source/examples/ekf_predict" -B "$work/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \

@@ -1,12 +1,12 @@
 // The per-step API of odomcov::closed_form (OdometryCovariance) and the Lie-group reading of the
 // closed form's transition matrix.
-#include "odomcov/odometry_covariance.hpp"
+#include "odomcov/closed_form/odometry_covariance.hpp"
 
 #include <gtest/gtest.h>
 
 #include <random>
 
-#include "odomcov/propagation.hpp"
+#include "odomcov/engine/propagation.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

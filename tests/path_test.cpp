@@ -1,4 +1,4 @@
-#include "odomcov/path.hpp"
+#include "odomcov/closed_form/path.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,14 +1,15 @@
 // Path-level theory: the [Kleeman95] tables (golden values), consistency under splitting
 // [Chong97 §4.1], and the per-sample propagation of [Wang88] as an independent route.
-#include "odomcov/propagation.hpp"
+#include "odomcov/engine/propagation.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 
-#include "odomcov/config.hpp"
-#include "odomcov/error.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/io/config_io.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

@@ -1,6 +1,6 @@
 // The random-number layer: ziggurat tables, and the normal generator's distribution checked at
 // a stated alpha with fixed keys.
-#include "random.hpp"
+#include "base/random.hpp"
 
 #include <gtest/gtest.h>
 

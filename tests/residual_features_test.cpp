@@ -1,14 +1,14 @@
 // The honest verdict of diagnose: a lab with an effect in no catalogue (a speed-dependent wheel
 // scale) must end unexplained with speed as the feature its misfit lines up with; a plain lab
 // must be explained; and the words must never say "explains" when the data are not explained.
-#include "odomcov/residual_features.hpp"
+#include "odomcov/measurement/residual_features.hpp"
 
 #include <gtest/gtest.h>
 
-#include "odomcov/diagnosis.hpp"
-#include "odomcov/odometry_correction.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/measurement/diagnosis.hpp"
+#include "odomcov/measurement/odometry_correction.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/io/world.hpp"
 
 namespace odomcov {
 namespace {

@@ -1,7 +1,7 @@
 // The order-2 model (second_order.hpp): an analytic golden case at large noise, the limit to
 // the first-order engine as the noise goes to 0 (every catalogue effect), split invariance,
 // and the coarsened route for logged runs.
-#include "odomcov/second_order.hpp"
+#include "odomcov/engine/second_order.hpp"
 
 #include <gtest/gtest.h>
 

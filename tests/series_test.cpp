@@ -13,7 +13,7 @@
 #include <limits>
 #include <vector>
 
-#include "series.hpp"
+#include "base/series.hpp"
 
 namespace odomcov::series {
 namespace {

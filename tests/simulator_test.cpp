@@ -1,6 +1,6 @@
 // The simulator against the closed form, at stated alpha with fixed seeds; determinism across
 // thread counts; the vectorised kernel against the scalar reference, bit for bit.
-#include "odomcov/simulator.hpp"
+#include "odomcov/engine/simulator.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,7 @@
 #include <cmath>
 #include <random>
 
-#include "odomcov/propagation.hpp"
+#include "odomcov/engine/propagation.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

@@ -1,4 +1,4 @@
-#include "odomcov/statistics.hpp"
+#include "odomcov/engine/statistics.hpp"
 
 #include <gtest/gtest.h>
 

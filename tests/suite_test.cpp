@@ -1,9 +1,9 @@
 // Loading suites with per-run logs, and the optiodom importer on small fixtures.
-#include "odomcov/suite.hpp"
+#include "odomcov/measurement/suite.hpp"
 
 #include <gtest/gtest.h>
 
-#include "odomcov/likelihood.hpp"
+#include "odomcov/measurement/likelihood.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -11,8 +11,9 @@
 #include <fstream>
 #include <map>
 
-#include "odomcov/error.hpp"
-#include "odomcov/optiodom.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/io/optiodom.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

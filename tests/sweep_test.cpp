@@ -1,11 +1,11 @@
-#include "odomcov/sweep.hpp"
+#include "odomcov/io/sweep.hpp"
 
 #include <gtest/gtest.h>
 
 #include <set>
 
-#include "odomcov/error.hpp"
-#include "odomcov/propagation.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/engine/propagation.hpp"
 
 namespace odomcov {
 namespace {

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "odomcov/path.hpp"
+#include "odomcov/closed_form/path.hpp"
 
 namespace odomcov::test {
 

@@ -1,14 +1,15 @@
 // synth writes a suite that loads back exactly, holds no trace of the world's effects, and is
 // deterministic.
-#include "odomcov/world.hpp"
+#include "odomcov/io/world.hpp"
 
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 
-#include "odomcov/simulator.hpp"
-#include "odomcov/suite.hpp"
+#include "odomcov/engine/simulator.hpp"
+#include "odomcov/measurement/suite.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {

@@ -6,8 +6,8 @@
 // eq. (40)]. Without measurement updates the filter's P must equal odomcov's own accumulated
 // covariance, which the program checks against the report's Table I value at the end (point E,
 // with the corrected signs of docs/conventions.md): it exits 1 when they disagree.
-#include <odomcov/odometry_covariance.hpp>
-#include <odomcov/path.hpp>
+#include <odomcov/closed_form/odometry_covariance.hpp>
+#include <odomcov/closed_form/path.hpp>
 
 #include <cmath>
 #include <cstdio>

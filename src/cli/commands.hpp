@@ -5,8 +5,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "odomcov/comparison.hpp"
-#include "odomcov/validation.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/measurement/validation.hpp"
 
 namespace odomcov::cli {
 

@@ -4,7 +4,8 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/comparison.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "failures.hpp"
 #include "output.hpp"
 

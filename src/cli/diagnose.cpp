@@ -6,9 +6,11 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/diagnosis.hpp"
-#include "odomcov/format.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/measurement/diagnosis.hpp"
+#include "odomcov/base/format.hpp"
+#include "odomcov/io/config_io.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "output.hpp"
 #include "progress.hpp"
 

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "odomcov/format.hpp"
+#include "odomcov/base/format.hpp"
 
 namespace odomcov::cli {
 namespace {

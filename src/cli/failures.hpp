@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "odomcov/comparison.hpp"
+#include "odomcov/measurement/comparison.hpp"
 
 namespace odomcov::cli {
 

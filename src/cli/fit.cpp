@@ -5,9 +5,10 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/calibration.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/likelihood.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/measurement/likelihood.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "output.hpp"
 #include "progress.hpp"
 

@@ -9,8 +9,8 @@
 #include <iostream>
 
 #include "commands.hpp"
-#include "odomcov/csv_import.hpp"
-#include "odomcov/optiodom.hpp"
+#include "odomcov/io/csv_import.hpp"
+#include "odomcov/io/optiodom.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {

@@ -4,7 +4,7 @@
 #include <iostream>
 
 #include "commands.hpp"
-#include "odomcov/error.hpp"
+#include "odomcov/base/error.hpp"
 #include "output.hpp"
 
 int main(int argc, char** argv) {

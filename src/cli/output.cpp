@@ -12,11 +12,11 @@
 #include <sstream>
 #include <vector>
 
-#include "odomcov/error.hpp"
-#include "odomcov/likelihood.hpp"
-#include "odomcov/limits.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/second_order.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/measurement/likelihood.hpp"
+#include "odomcov/closed_form/limits.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/engine/second_order.hpp"
 
 namespace odomcov::cli {
 

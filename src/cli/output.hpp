@@ -6,9 +6,9 @@
 
 #include <string>
 
-#include "odomcov/closed_form.hpp"
-#include "odomcov/statistics.hpp"
-#include "odomcov/suite.hpp"
+#include "odomcov/closed_form/closed_form.hpp"
+#include "odomcov/engine/statistics.hpp"
+#include "odomcov/measurement/suite.hpp"
 
 namespace odomcov::cli {
 

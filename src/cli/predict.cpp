@@ -9,12 +9,14 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/csv_import.hpp"
-#include "odomcov/format.hpp"
-#include "odomcov/odometry_covariance.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/suite.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/io/csv_import.hpp"
+#include "odomcov/base/format.hpp"
+#include "odomcov/closed_form/odometry_covariance.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/measurement/suite.hpp"
+#include "odomcov/io/config_io.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {

@@ -7,8 +7,9 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/validation.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/measurement/validation.hpp"
+#include "odomcov/io/config_io.hpp"
 #include "output.hpp"
 #include "progress.hpp"
 

@@ -7,9 +7,9 @@
 #include <regex>
 
 #include "commands.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/format.hpp"
-#include "odomcov/sweep.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/base/format.hpp"
+#include "odomcov/io/sweep.hpp"
 #include "output.hpp"
 #include "progress.hpp"
 

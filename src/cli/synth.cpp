@@ -5,8 +5,8 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/statistics.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/engine/statistics.hpp"
+#include "odomcov/io/world.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {

@@ -4,9 +4,10 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/odometry_covariance.hpp"
-#include "odomcov/propagation.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/closed_form/odometry_covariance.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/io/config_io.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {

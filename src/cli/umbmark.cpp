@@ -5,7 +5,8 @@
 #include <sstream>
 
 #include "commands.hpp"
-#include "odomcov/calibration.hpp"
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/io/suite_io.hpp"
 #include "output.hpp"
 
 namespace odomcov::cli {

@@ -7,7 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

@@ -8,10 +8,8 @@
 #include <cmath>
 #include <limits>
 
-#include "effect.hpp"
-#include "odomcov/diagnosis.hpp"
-#include "odomcov/format.hpp"
-#include "odomcov/suite.hpp"
+#include "effects/effect.hpp"
+#include "odomcov/base/format.hpp"
 
 namespace odomcov::effects {
 namespace {
@@ -90,20 +88,20 @@ double excess_kurtosis(const std::vector<double>& x) {
 /// its sample excess kurtosis times its variance squared, weighted by travel) gives
 /// rate sigma^4 = (16/3) sum kappa4 / sum d and sigma^2 = rate sigma^4 / q. Returns NaN when no
 /// straight experiment of ten runs or more shows heavy tails.
-double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
+double bumps_sigma(const std::vector<ObservedExperiment>& data, double q) {
   double cumulant = 0.0, travel = 0.0;
-  for (const SuiteExperiment& ex : suite.experiments) {
-    if (ex.logged || ex.runs.size() < 10) continue;
+  for (const ObservedExperiment& ex : data) {
+    if (ex.path == nullptr || ex.errors.size() < 10) continue;
     double d = 0;
     bool straight = true;
-    for (std::size_t i = 0; i < ex.path.interval_count(); ++i) {
-      const ArcSegment s = ex.path.interval(i);
+    for (std::size_t i = 0; i < ex.path->interval_count(); ++i) {
+      const ArcSegment s = ex.path->interval(i);
       straight = straight && s.left_m == s.right_m;
       d += std::abs(s.center_m());
     }
     if (!straight || d <= 0) continue;
     std::vector<double> along;
-    for (const SuiteRun& r : ex.runs) along.push_back(run_error(ex, r, wheelbase_m).x());
+    for (const Vector3& e : ex.errors) along.push_back(e.x());
     double mean = 0, var = 0;
     for (double v : along) mean += v / static_cast<double>(along.size());
     for (double v : along) var += (v - mean) * (v - mean) / static_cast<double>(along.size() - 1);
@@ -117,12 +115,12 @@ double bumps_sigma(const Suite& suite, double wheelbase_m, double q) {
 /// diagnose's completion (EffectInfo::complete): the likelihood fitted the rate with sigma held
 /// at its start, i.e. q = rate sigma^2; sigma comes from the tails (bumps_sigma), the rate is
 /// then q / sigma^2.
-std::string complete_bumps(const Suite& suite, double wheelbase_m, EffectSpec& spec,
+std::string complete_bumps(const std::vector<ObservedExperiment>& data, EffectSpec& spec,
                            std::vector<double>& stderrs) {
   const double sigma_fixed = spec.values[1];
   const double q = spec.values[0] * sigma_fixed * sigma_fixed;
   const double q_se = stderrs[0] * sigma_fixed * sigma_fixed;
-  const double sigma = bumps_sigma(suite, wheelbase_m, q);
+  const double sigma = bumps_sigma(data, q);
   const double s = std::isfinite(sigma) ? sigma : sigma_fixed;
   spec.values = {q / (s * s), s};
   stderrs = {q_se / (s * s), std::numeric_limits<double>::quiet_NaN()};

@@ -16,8 +16,8 @@
 #include <mutex>
 #include <utility>
 
-#include "effect.hpp"
-#include "odomcov/format.hpp"
+#include "effects/effect.hpp"
+#include "odomcov/base/format.hpp"
 
 namespace odomcov {
 namespace {

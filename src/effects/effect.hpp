@@ -11,10 +11,10 @@
 #include <string>
 #include <vector>
 
-#include "odomcov/closed_form.hpp"
-#include "odomcov/effects.hpp"
-#include "odomcov/path.hpp"
-#include "random.hpp"
+#include "odomcov/closed_form/closed_form.hpp"
+#include "odomcov/effects/effects.hpp"
+#include "odomcov/closed_form/path.hpp"
+#include "base/random.hpp"
 
 namespace odomcov::effects {
 

@@ -1,7 +1,7 @@
 #include <cmath>
 
-#include "effect.hpp"
-#include "odomcov/format.hpp"
+#include "effects/effect.hpp"
+#include "odomcov/base/format.hpp"
 
 namespace odomcov {
 
@@ -206,4 +206,43 @@ std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
 }
 
 }  // namespace effects
+FitCoordinate fit_coordinate(const EffectParameterInfo& p) {
+  FitCoordinate c;
+  const double scale = std::abs(p.typical - p.neutral);
+  c.fd_abs = 0.05 * std::max(scale, 1e-9);
+  c.fd_rel = 0.05;
+  c.fd_origin = p.neutral;
+  using T = FitCoordinate::Transform;
+  if (p.lower <= -1e300 && p.upper >= 1e300) {  // signed and unbounded (reference_offset.dx)
+    c.transform = T::identity;
+    c.lower_u = p.neutral - 1e4 * scale;
+    c.upper_u = p.neutral + 1e4 * scale;
+    c.step_u = std::max(scale, 1e-6);
+  } else if (p.open_lower && p.lower == 0.0 && p.upper >= 1e300 && p.neutral == 1.0) {
+    c.transform = T::log;  // a positive scale factor (Ed, Eb, Es)
+    c.lower_u = std::log(0.5);
+    c.upper_u = std::log(2.0);
+    c.step_u = std::max(scale, 1e-3);
+  } else if (p.open_lower && p.lower == 0.0 && p.upper >= 1e300) {
+    c.transform = T::log;  // any other positive quantity
+    const double typical = p.typical > 0 ? p.typical : 1.0;
+    c.lower_u = std::log(typical) - std::log(1e6);
+    c.upper_u = std::log(typical) + std::log(1e6);
+    c.step_u = 0.3;
+  } else if (p.open_lower && p.open_upper) {  // an open interval (a, b), e.g. rho in (-1, 1)
+    c.transform = T::atanh;
+    c.mid = 0.5 * (p.lower + p.upper);
+    c.half = 0.5 * (p.upper - p.lower);
+    c.lower_u = -6.0;
+    c.upper_u = 6.0;
+    c.step_u = 0.3;
+  } else {  // a size that may be zero (slip, per-run sigma, bump rate and size)
+    c.transform = T::sqrt;
+    c.lower_u = 0.0;
+    c.upper_u = std::sqrt(1e4 * p.typical);
+    c.step_u = 0.5 * std::sqrt(p.typical);
+  }
+  return c;
+}
+
 }  // namespace odomcov

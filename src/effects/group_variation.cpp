@@ -9,8 +9,8 @@
 //    through them.
 #include <cstdint>
 
-#include "effect.hpp"
-#include "odomcov/format.hpp"
+#include "effects/effect.hpp"
+#include "odomcov/base/format.hpp"
 
 namespace odomcov {
 

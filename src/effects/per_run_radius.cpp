@@ -3,7 +3,7 @@
 // World: true travel x (1 + eps) with eps_L, eps_R drawn per run. Model: two standard-normal
 // per-run constants with columns (sigma L', 0) and (0, sigma R') on (e_L, e_R), L', R' the
 // piece's systematic true travel; the engine carries them as augmented state.
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

@@ -7,7 +7,7 @@
 // first order in the heading error.
 #include <cmath>
 
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

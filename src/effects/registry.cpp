@@ -1,7 +1,7 @@
 // The one place effects are registered, in the SPEC catalogue's order. To add an effect, write
 // src/effects/<name>.cpp (world side and model side together, see effect.hpp) and add its
 // line here.
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 

@@ -1,6 +1,6 @@
 // scale_error {Es}: both wheels' true travel is Es times the encoder's (a wrong mean wheel
 // diameter or encoder resolution). World: systematic scale. Model: the same scale.
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

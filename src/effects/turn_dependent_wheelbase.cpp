@@ -2,7 +2,7 @@
 // turn (tyre scrub), so the true wheelbase of each increment is B (Eb_arc + (Eb_spin - Eb_arc) r)
 // with r the spin fraction |dR - dL|/(|dR| + |dL|) (0 on a line, B|kappa|/2 on a forward arc, 1
 // on the spot). World and model: the same factor per sample / per piece, from its Motion.
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

@@ -5,7 +5,7 @@
 // variance k^2 |R - L|/B over a piece.
 #include <cmath>
 
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

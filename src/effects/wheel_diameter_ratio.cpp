@@ -2,7 +2,7 @@
 // with the mean diameter kept: true dL = dL 2/(Ed + 1), true dR = dR 2 Ed/(Ed + 1).
 // World: a systematic scale of each wheel's travel. Model: the same scales, so the mean is the
 // exact perturbed path and the covariance is propagated along it.
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

@@ -4,7 +4,7 @@
 // rho kL kR sqrt(|dL| |dR|) over its samples (their ratio is constant within a piece).
 #include <cmath>
 
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

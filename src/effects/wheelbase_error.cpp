@@ -1,6 +1,6 @@
 // wheelbase_error {Eb}: the true wheelbase is Eb B [Borenstein96]. World: systematic factor on
 // the wheelbase. Model: the same factor (exact mean, covariance along the true path).
-#include "effect.hpp"
+#include "effects/effect.hpp"
 
 namespace odomcov::effects {
 namespace {

@@ -5,9 +5,9 @@
 #include <cstdint>
 
 #include "fuzz_util.hpp"
-#include "odomcov/comparison.hpp"
-#include "odomcov/csv_import.hpp"
-#include "odomcov/error.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/io/csv_import.hpp"
+#include "odomcov/base/error.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace odomcov;

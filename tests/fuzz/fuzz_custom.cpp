@@ -7,10 +7,11 @@
 #include <cstdint>
 
 #include "fuzz_util.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/second_order.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/engine/second_order.hpp"
+#include "odomcov/io/config_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace odomcov;

@@ -3,9 +3,9 @@
 #include <cstdint>
 
 #include "fuzz_util.hpp"
-#include "odomcov/comparison.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/optiodom.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/io/optiodom.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace odomcov;

@@ -4,10 +4,11 @@
 #include <cstdint>
 
 #include "fuzz_util.hpp"
-#include "odomcov/config.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/validation.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/measurement/validation.hpp"
+#include "odomcov/io/config_io.hpp"
 
 namespace {
 

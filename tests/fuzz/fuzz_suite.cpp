@@ -3,8 +3,9 @@
 #include <cstdint>
 
 #include "fuzz_util.hpp"
-#include "odomcov/comparison.hpp"
-#include "odomcov/error.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace odomcov;

@@ -3,8 +3,8 @@
 #include <cstdint>
 
 #include "fuzz_util.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/sweep.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/io/sweep.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace odomcov;

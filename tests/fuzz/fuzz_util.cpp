@@ -7,10 +7,11 @@
 #include <fstream>
 #include <regex>
 
-#include "odomcov/comparison.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/likelihood.hpp"
-#include "odomcov/suite.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/measurement/likelihood.hpp"
+#include "odomcov/measurement/suite.hpp"
+#include "odomcov/io/suite_io.hpp"
 
 namespace odomcov::fuzz {
 namespace {

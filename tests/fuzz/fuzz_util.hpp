@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "odomcov/suite_writer.hpp"
+#include "odomcov/io/suite_writer.hpp"
 
 namespace odomcov::fuzz {
 

@@ -2,9 +2,9 @@
 #include <cstdint>
 
 #include "fuzz_util.hpp"
-#include "odomcov/error.hpp"
-#include "odomcov/propagation.hpp"
-#include "odomcov/world.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/io/world.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace odomcov;

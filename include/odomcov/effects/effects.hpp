@@ -1,0 +1,220 @@
+// Physical effects (docs/formats.md, "Effect catalogue"): what a real robot does beyond white
+// wheel noise. Each effect has a world side (the simulator's exact perturbation) and a model
+// side (its first-order contribution to the predicted mean and covariance). The catalogue and
+// its implementations live in src/effects/, one file per effect.
+#pragma once
+
+#include <memory>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "odomcov/base/error.hpp"
+#include "odomcov/closed_form/path.hpp"
+
+namespace odomcov {
+
+/// At most this many effects in one list: each has its own random-stream slot (random.hpp).
+inline constexpr std::size_t kMaxEffects = 16;
+
+struct CustomEffect;
+
+/// One effect with its parameter values, in the catalogue's parameter order (for a custom
+/// effect, in the order of its definition's parameters).
+struct EffectSpec {
+  std::string name;
+  std::vector<double> values;
+  /// group_variation only: the parameter it varies between groups, "<effect>.<parameter>" of
+  /// another effect in the same list (e.g. "wheelbase_error.Eb"); empty for every other effect.
+  std::string target = {};
+  /// The definition of a custom effect (docs/effects.md, "Custom effects"); null for a
+  /// catalogue effect.
+  std::shared_ptr<const CustomEffect> custom = nullptr;
+
+  bool operator==(const EffectSpec& other) const;
+};
+using EffectList = std::vector<EffectSpec>;
+
+struct EffectParameterInfo {
+  std::string name;
+  std::string unit;
+  double lower = 0.0;  // valid values lie between lower and upper
+  double upper = 0.0;
+  bool open_lower = false;  // lower itself excluded
+  bool open_upper = false;
+  double neutral = 0.0;  // the value at which the effect does nothing
+  double typical = 0.0;  // a moderate size, e.g. for starting a fit
+  /// True for a size that plausibly changes between groups of runs (days, loads) even when the
+  /// model does not have its effect yet (wheelbase_error.Eb, wheel_diameter_ratio.Ed: tyre
+  /// pressure, load): diagnose then tries group_variation of it.
+  bool varies_between_groups = false;
+};
+
+/// How a fit moves one parameter: the coordinate u its optimiser sees (v = f(u)), the box and
+/// initial step in u, and the fast path's difference step in v, max(fd_abs, fd_rel |v - fd_origin|).
+struct FitCoordinate {
+  enum class Transform { log, atanh, sqrt, identity };
+  Transform transform = Transform::identity;
+  double lower_u = -1e300, upper_u = 1e300;
+  double step_u = 0.1;
+  double mid = 0.0, half = 1.0;  // atanh: the open interval (mid - half, mid + half)
+  double fd_abs = 0.0, fd_rel = 0.0, fd_origin = 0.0;
+};
+
+/// A parameter's fit coordinate, derived from its declared range: identity for a signed,
+/// unbounded one (reference_offset.dx); log for a positive scale factor, range (0, inf) with
+/// neutral 1 (Ed, Eb, Es; box [1/2, 2]); log for any other (0, inf) parameter (box typical
+/// x 1e-6 .. 1e6); scaled atanh for an open interval (a, b) (rho in (-1, 1)); square root for a
+/// size that may be zero, [0, inf) (slip, per-run sigma, bump rate).
+FitCoordinate fit_coordinate(const EffectParameterInfo& p);
+
+/// What a candidate's completion (EffectInfo::complete) sees of a suite: per experiment, its
+/// planned path (nullptr for runs with their own encoder logs) and its runs' errors (measured -
+/// odometry, start frame, at the model's wheelbase).
+struct ObservedExperiment {
+  const Path* path = nullptr;
+  std::vector<Vector3> errors;
+};
+
+/// diagnose's completion of a candidate (EffectInfo::complete): `spec` holds the fitted values,
+/// `stderrs` one entry per parameter (NaN where not fitted); it sets what the likelihood cannot
+/// determine and returns a note on how, for the report ("" for none).
+using CandidateCompletion = std::string (*)(const std::vector<ObservedExperiment>& data,
+                                            EffectSpec& spec, std::vector<double>& stderrs);
+
+struct EffectInfo {
+  std::string name;
+  std::vector<EffectParameterInfo> parameters;
+  std::string physics;    // what it is, in plain words
+  std::string signature;  // how it shows in the data
+  std::string summary;    // the catalogue's one-line definition (docs/formats.md)
+  /// True when the effect moves the mean (a systematic error: Ed, Eb, Es); false when it only
+  /// adds randomness, which shows in the covariance (and the tails).
+  bool systematic = false;
+  /// True when the effect makes the errors non-Gaussian (heavy tails): a model with it expects
+  /// the kurtosis compare tests for.
+  bool heavy_tails = false;
+  /// True when the effect acts across the runs of a group (group_variation): it is not seen by
+  /// one run alone, so the simulator of one path and the model of one run leave it out; synth
+  /// draws it per group and the suite likelihood correlates the runs of a group (likelihood.hpp).
+  bool grouped = false;
+  // ---- What diagnose needs to know (so that diagnosis and calibration hold no effect names).
+  /// The parameters diagnose fits for this candidate; empty: all of them (bumps: rate only, as
+  /// a Gaussian likelihood sees rate and sigma only through rate sigma^2).
+  std::vector<std::string> diagnose_fitted{};
+  /// What completes the candidate after its fit (bumps: sigma from the tails); may be nullptr.
+  CandidateCompletion complete = nullptr;
+  /// The candidate a Gaussian likelihood cannot tell this one apart from ("" for none): when both
+  /// are significant, heavy tails put the one with heavy_tails first, Gaussian tails the other.
+  std::string confused_with{};
+};
+
+/// A custom effect, defined in YAML: its own parameters and up to four expressions over the
+/// per-sample variables (custom_effect_variables) and the parameters, evaluated by muparser.
+/// An empty expression means 1. true travel of each wheel = scale x scale_<wheel> x encoder,
+/// true wheelbase = wheelbase_factor x nominal. Build it with define_custom_effect.
+struct CustomEffect {
+  /// One expression and where it was written (file, line, dotted key) for runtime errors.
+  struct Expression {
+    std::string text;  // "" = 1
+    std::string file;
+    int line = 0;
+    std::string key;
+  };
+  std::string name;
+  std::vector<std::string> parameters;
+  std::string file;  // where the definition was written, for messages
+  int line = 0;
+  std::string key;
+  Expression scale, scale_left, scale_right, wheelbase_factor;
+  /// The description fit and diagnose use: parameters unbounded and signed (identity fit
+  /// transform), neutral at the starting value; systematic.
+  EffectInfo info;
+  /// What the expressions depend on, set by define_custom_effect: 0 nothing, 1 the increment
+  /// (v, kappa, r, dir, turn), 2 the history (s, t).
+  int dependence = 0;
+
+  bool operator==(const CustomEffect& other) const;
+};
+
+/// The per-sample variables a custom effect's expressions may use, in the SPEC's order:
+/// v, kappa, r, dir, turn, s, t.
+const std::vector<std::string>& custom_effect_variables();
+
+/// "" when `text` compiles with the variables and these parameter names, else muparser's
+/// message (e.g. "Unexpected token \"x\" found at position 4.").
+std::string check_custom_expression(const std::string& text,
+                                    const std::vector<std::string>& parameters);
+
+/// "" when `name` can name a custom effect or one of its parameters (an identifier of letters,
+/// digits and '_', not starting with a digit, not a variable's name), else why not.
+std::string check_custom_name(const std::string& name);
+
+/// Builds a custom effect definition and its spec with the starting values. Throws InputError
+/// (file, line and key of the offending expression) for a bad expression or name, or a name
+/// that clashes with a catalogue effect.
+EffectSpec define_custom_effect(CustomEffect definition, const std::vector<double>& start);
+
+/// Every effect of the catalogue, in the order of docs/formats.md.
+const std::vector<EffectInfo>& effect_catalogue();
+/// The one lookup of an effect by name: a custom effect defined in `context` (a model's or a
+/// candidate list's effects) first, then the catalogue; nullptr when unknown.
+const EffectInfo* find_effect(const std::string& name, const EffectList& context = {});
+/// The description of a spec: its custom definition's, or the catalogue's (nullptr when
+/// unknown).
+const EffectInfo* info_of(const EffectSpec& spec);
+/// The spec named `name` in `list`; nullptr when absent.
+const EffectSpec* find_spec(const EffectList& list, const std::string& name);
+EffectSpec* find_spec(EffectList& list, const std::string& name);
+
+/// "" when the values are valid for the effect, else what is wrong ("Ed must be > 0").
+std::string check_effect(const EffectSpec& spec);
+
+/// What the library throws for an effect list given through the API that is not valid: an
+/// unknown name, the wrong number of values, a value out of range, an effect listed twice, more
+/// than kMaxEffects effects, or (from the Simulator) a path an effect cannot be simulated on.
+/// An InputError whose key names the list entry ("effects[1].bumps"), so the CLI reports it as
+/// bad input (exit 2).
+class EffectError : public InputError {
+ public:
+  EffectError(const std::string& key, const std::string& what) : InputError("", 0, key, what) {}
+};
+
+/// The candidate that refits the robot's white wheel noise (k_left, k_right) rather than adding
+/// an effect.
+inline constexpr const char* kWheelNoiseLevel = "wheel_noise_level";
+
+/// The name of the one effect that varies another effect's parameter between groups.
+inline constexpr const char* kGroupVariation = "group_variation";
+
+/// "" when the list's group_variation (if any) names a parameter of another effect in the list
+/// that moves the mean (a systematic effect), else what is wrong.
+std::string check_group_target(const EffectList& list);
+
+/// Where a list's group_variation points: the varied effect's index in the list, the index of
+/// the parameter within it, and the between-group std-dev. `present` is false without one.
+struct GroupTarget {
+  bool present = false;
+  std::size_t effect = 0, parameter = 0;
+  double sd = 0.0;
+};
+GroupTarget group_target(const EffectList& list);
+
+/// The effects one group of runs sees (world side): the list without group_variation, its
+/// target parameter drawn from N(value, sd^2) by a counter-based draw keyed on (seed, group
+/// name), so every experiment of a group gets the same value whatever the order or thread
+/// count. Throws EffectError when the draw leaves the parameter's range (sd far too large).
+EffectList group_effects(const EffectList& list, std::uint64_t seed, const std::string& group);
+
+/// Throws EffectError unless every spec passes check_effect, no name repeats, a group_variation
+/// names a systematic parameter of the list (check_group_target) and the list has
+/// at most kMaxEffects entries. Every entry point that builds effects (Simulator, predict,
+/// resolve) calls it.
+void check_effects(const EffectList& list);
+
+/// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}" or
+/// "- group_variation: {parameter: wheelbase_error.Eb, sd: 0.002}", or for a custom effect its
+/// whole definition with the current values as starting values, on one line.
+std::string effect_yaml(const EffectSpec& spec);
+
+}  // namespace odomcov

@@ -1,0 +1,72 @@
+// The order-2 model: the mean and covariance of the end-pose error exact in the heading noise
+// (docs/orders.md has the derivation; src/engine/second_order.cpp the formulas).
+//
+// With white Gaussian wheel noise, Gaussian per-run constants and systematic factors, the true
+// heading error phi(t) along the path is a Gaussian process, linear in the noise. Writing the
+// true position in complex form, p = int exp(i (theta_bar(t) + phi(t))) (d(t) dt + dn(t)), the
+// Gaussian characteristic function E[exp(i psi)] = exp(-Var(psi)/2) and Stein's lemma
+// (E[X f(psi)] = Cov(X, psi) E[f'(psi)] for jointly Gaussian zero-mean X, psi) give E[p],
+// Cov(p, conj p), Cov(p, p), Cov(p, phi_end) and Var(phi_end) as single and double integrals
+// along the path, with no truncation in the noise. The integrals are done by Gauss-Legendre
+// quadrature per piece (<= 0.25 rad, <= 1 m; equal consecutive model pieces are merged first).
+//
+// Exact for the white wheel noise, wheel noise correlation, turn slip, per-run radius and every
+// systematic effect; bumps enter through their Gaussian equivalent (an approximation: the
+// model's mean and covariance stay exact to second order in the bump size, its higher moments
+// do not). Not modelled: the wrap of theta to (-pi, pi] (the model's theta is unwrapped), and the
+// O(1/f) difference between the sampled odometry and the continuous noise of the model.
+#pragma once
+
+#include <vector>
+
+#include "odomcov/effects/effects.hpp"
+#include "odomcov/closed_form/path.hpp"
+#include "odomcov/engine/propagation.hpp"
+
+namespace odomcov {
+
+/// Gauss-Legendre nodes per model piece in the order-2 integrals (the integrand varies over a
+/// piece as exp(i a u) with |a| <= 0.25 and linearly in the variances; 4 nodes give ~1e-10
+/// relative accuracy, checked against 8 in the tests).
+inline constexpr int kSecondOrderNodes = 4;
+
+/// The order-2 prediction for a sequence of constant-curvature pieces (each already small, e.g.
+/// model_pieces): `mean` is the exact systematic mean, `noise_mean` the exact noise-induced
+/// mean (E[error] - mean), `cov` the exact covariance; world frame, error = true - odometry.
+/// Consumes only effects::resolve, so every effect's model side (and any piece-dependent one)
+/// enters as it does in the first-order engine.
+Prediction predict_second_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                                const EffectList& effects);
+/// The same with each piece's duration, which motion-dependent effects use (speed, time).
+Prediction predict_second_order(const std::vector<ArcSegment>& pieces,
+                                const std::vector<double>& durations_s, const Robot& robot,
+                                const EffectList& effects);
+
+/// The number of quadrature pieces predict_second_order cuts `pieces` into (before any
+/// effect's split); above kMaxSecondOrderPieces (limits.hpp) it throws std::length_error.
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m);
+
+/// Merges consecutive pieces (e.g. the per-sample pieces of a logged run) into pieces that turn
+/// at most kPieceMaxAngle and travel at most kPieceMaxTravel, never merging across a reversal
+/// of either wheel.
+std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m);
+/// The same, with each coarse piece's duration (the sum of its pieces') in `coarse_durations_s`
+/// when `durations_s` is not empty.
+std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, double wheelbase_m,
+                                       const std::vector<double>& durations_s,
+                                       std::vector<double>* coarse_durations_s);
+
+/// The model of the given order (1: predict, the first-order engine; 2: the order-2 model) for
+/// any pieces. For order 2 on fine pieces (a logged run), the first order is taken on the fine
+/// pieces and only the higher-order correction on coarsened ones:
+///   P2 = P1(fine) + [P2(coarse) - P1(coarse)],   mean likewise,
+/// so the coarsening costs accuracy only in the (small) correction.
+Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
+                              const EffectList& effects, int order);
+/// The same with each piece's duration (logged runs: the log's t column; planned paths:
+/// model_pieces), which motion-dependent effects use.
+Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
+                              const std::vector<double>& durations_s, const Robot& robot,
+                              const EffectList& effects, int order);
+
+}  // namespace odomcov

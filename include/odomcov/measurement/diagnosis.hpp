@@ -1,0 +1,150 @@
+// diagnose: which physical effect is the model missing? Every candidate is fitted by maximum
+// likelihood; the best is named when it is significant after the multiple-comparison
+// correction. The verdict is honest: the data are "explained" only when compare finds the final
+// model consistent; otherwise diagnose says what the remaining misfit lines up with.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/comparison.hpp"
+#include "odomcov/measurement/odometry_correction.hpp"
+#include "odomcov/measurement/residual_features.hpp"
+
+namespace odomcov {
+
+/// One kind of diagnose candidate: every catalogue effect (from its EffectInfo) and the robot
+/// candidates (wheel_noise_level), all described in src/effects/ so that diagnose holds no
+/// effect's name.
+struct CandidateType {
+  /// The effect's name, kWheelNoiseLevel, or "group_variation(E.p)" for a group candidate.
+  std::string name;
+  /// The effect whose spec holds the candidate's result (group_variation for a group candidate;
+  /// "" for a robot candidate).
+  std::string effect;
+  std::string physics, signature;  // plain words (EffectInfo)
+  bool systematic = false;         // judged on the full likelihood, else on its scatter part
+  bool heavy_tails = false;
+  /// The fit names it moves: "<effect>.<parameter>", or robot parameters ("k_left").
+  std::vector<std::string> fitted;
+  /// True when every fitted parameter's "no effect" value is the closed edge of its range (the
+  /// LRT is then a 50:50 chi^2 mixture [Self87]).
+  bool on_boundary = false;
+  bool robot = false;  // moves robot parameters (its YAML is the robot line), not an effect
+  std::string confused_with;         // EffectInfo::confused_with
+  CandidateCompletion complete = nullptr;
+  /// Specs added to the model before the fit, at their starting values (a user candidate's
+  /// given spec; a group candidate's varied effect when new, and group_variation). Empty: the
+  /// fit adds the effect with its fitted parameters at their neutral values.
+  EffectList start{};
+};
+/// The candidate of one effect (catalogue or custom), from its EffectInfo.
+CandidateType effect_candidate(const EffectInfo& info);
+/// Every candidate kind: the catalogue's effects in registry order, then the robot candidates.
+const std::vector<CandidateType>& candidate_types();
+/// nullptr when unknown.
+const CandidateType* find_candidate(const std::string& name);
+
+/// Family-wise level of diagnose's decision: the best candidate must have p < alpha/m over the
+/// m candidates (Bonferroni). 0.01 keeps false alarms near 1% while finding moderate effects.
+inline constexpr double kDiagnoseAlpha = 0.01;
+
+struct ModelSummary {
+  double log_likelihood = 0.0;
+  double nees_mean = 0.0;  // over all runs
+  std::string verdict;     // compare's, at the same alpha
+};
+
+struct Candidate {
+  std::string effect;  // catalogue name or kWheelNoiseLevel
+  std::vector<std::string> parameters;  // the effect's parameter names (k_left, k_right)
+  std::vector<double> values;
+  std::vector<double> stderrs;  // NaN where the data do not give one
+  bool systematic = false;  // moves the mean (fitted on the full likelihood), else on scatter
+  /// The gain in the likelihood the candidate is fitted and judged on, against the model with
+  /// its own effects refitted: the full one for a systematic candidate, the scatter part for a
+  /// random one. Its LRT and delta BIC come from this.
+  double delta_log_likelihood = 0.0;
+  double delta_full_log_likelihood = 0.0;  // the gain in the full likelihood, for reference
+  double delta_bic = 0.0;             // -2 dLL + (free parameters) ln(runs): < 0 favours it
+  double p_value = 1.0;  // likelihood ratio, chi^2 (boundary: 1/2 chi^2 mixture)
+  int dof = 0;
+  bool significant = false;
+  /// The experiments whose likelihood rose most, with the rise: where the effect showed.
+  std::vector<std::pair<std::string, double>> evidence;
+  std::string note;   // how a parameter was found when the likelihood cannot (bumps' sigma)
+  std::string physics, signature;  // its CandidateType's, for explain
+  bool robot = false;              // moves robot parameters: its YAML is the robot line
+  SuiteModel model;   // the model with this candidate added
+};
+
+struct Diagnosis {
+  double alpha = kDiagnoseAlpha;
+  std::size_t runs = 0;
+  ModelSummary before;
+  std::vector<Candidate> candidates;  // best first
+  std::optional<std::size_t> best;    // index into candidates, if significant
+  ModelSummary after;                 // with the best added (= before when none)
+  TestResult kurtosis;                // the shape test that separates bumps from noise level
+  bool heavy_tails = false;
+  /// True only when the final model (the best candidate's when one is named, else the suite's)
+  /// is consistent with the data at alpha, as compare judges it.
+  bool explained = false;
+  /// What the final model's misfit lines up with, best first (residual_alignment); filled
+  /// whenever explained is false.
+  std::vector<ResidualAlignment> residuals;
+  /// The corrected odometry the final model's systematic effects imply, with the runs'
+  /// end-pose error re-integrated before and after (none without such effects).
+  std::optional<OdometryCorrection> odometry_correction;
+};
+
+/// Runs every candidate (all catalogue effects not in the model, group_variation of the
+/// model's systematic parameters and of those that vary between groups when the suite has
+/// groups, and wheel_noise_level; or the `only` subset; plus the user's `candidates`).
+/// Parameters of effects already in the model are refitted alongside each candidate, and the
+/// likelihood gain is measured against that refitted model.
+///
+/// Each candidate is fitted and judged on the part of the Gaussian likelihood it explains:
+/// systematic candidates (Ed, Eb, Es) on the full likelihood; random ones on its scatter part
+/// (scatter_log_likelihood), so a variance effect cannot gain by absorbing a mean misfit. The
+/// gains are on one scale: the LRT gives each p-value (for random candidates scaled by the
+/// kurtosis when the tails are heavy, [Browne84]) and delta BIC ranks them, significant ones
+/// first. One signature rule settles the pair a Gaussian likelihood cannot tell apart: bumps and
+/// wheel_noise_level both add variance that grows with distance, so heavy tails (Mardia's
+/// kurtosis, shape only) put bumps ahead of wheel_noise_level and Gaussian tails the reverse.
+///
+/// `progress`, when given, is kept up to date for a progress display (the library prints
+/// nothing): the number of fits to run and done, and the likelihood evaluations so far.
+struct DiagnoseProgress {
+  std::atomic<std::int64_t> fits_total{0};
+  std::atomic<std::int64_t> fits_done{0};
+  std::atomic<std::int64_t> evaluations{0};
+};
+/// `candidates`: the user's own hypotheses (custom effects, or catalogue effects with starting
+/// values), tried beside the catalogue from their given values (diagnose --candidates).
+/// `path` is how every fit evaluates the likelihood (FitPath): the fast path shares one
+/// ResidualCache over the round, so each candidate parameter's sensitivity around the refitted
+/// model is propagated once.
+Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
+                   const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr,
+                   const EffectList& candidates = {}, FitPath path = FitPath::fast);
+
+/// Plain words for a named candidate: the physics, the fitted size, the signature and where it
+/// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts
+/// ...; it showed most in line-8m (log-likelihood +812) and line-2m (+61)".
+std::string explain(const Candidate& c);
+
+/// The YAML to paste: an effect for model.effects, or the robot line for wheel_noise_level.
+std::string candidate_yaml(const Candidate& c, const SuiteModel& model);
+
+/// The closing words of diagnose's report: "explained" only when it is; otherwise that the
+/// model is still inconsistent and the features the misfit lines up with (at most three),
+/// with their p-values and what kind of effect each points at.
+std::string verdict_text(const Diagnosis& d);
+
+}  // namespace odomcov

@@ -1,0 +1,184 @@
+// Loading a measurement suite (docs/formats.md, "Measurement suite"): the YAML, the
+// measurement CSVs and the encoder logs it names. Part of odomcov::io.
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <set>
+
+#include "io/config_yaml.hpp"
+#include "io/csv.hpp"
+#include "odomcov/measurement/config.hpp"
+#include "odomcov/base/format.hpp"
+#include "odomcov/closed_form/limits.hpp"
+#include "odomcov/measurement/suite.hpp"
+#include "odomcov/io/suite_io.hpp"
+#include "io/yaml_util.hpp"
+
+namespace odomcov {
+namespace {
+
+using yaml::Where;
+
+
+/// A measured pose within the numeric domain (limits.hpp): positions and heading at most
+/// kMaxLength_m (the heading is wrapped, but 1e6 rad is no angle anyone measured).
+void check_pose(const std::string& file, const csv::Row& row, std::size_t first_column) {
+  for (std::size_t c = first_column; c < first_column + 3; ++c) {
+    if (const std::string e = limits::check_length(row.number(c)); !e.empty()) {
+      csv::fail(file, row.line, row.meta->columns[c], e);
+    }
+  }
+}
+
+std::vector<SuiteRun> load_measurements(const std::string& csv_file) {
+  const csv::Table table = csv::read(csv_file, {"run", "x", "y", "theta"});
+  std::vector<SuiteRun> runs;
+  std::set<std::string> ids;
+  for (const csv::Row& row : table.rows) {
+    SuiteRun run;
+    run.id = row.text(0);
+    if (run.id.empty()) csv::fail(csv_file, row.line, "run", "empty run id");
+    if (!ids.insert(run.id).second) {
+      csv::fail(csv_file, row.line, "run", "duplicate run id " + quote(run.id));
+    }
+    run.measured = {row.number(1), row.number(2), row.number(3)};
+    check_pose(csv_file, row, 1);
+    runs.push_back(std::move(run));
+  }
+  return runs;
+}
+
+SuiteRun load_log(const std::string& log_file) {
+  const csv::Table table = csv::read(log_file, {"t", "left", "right", "x", "y", "theta"});
+  SuiteRun run;
+  run.id = std::filesystem::path(log_file).stem().string();
+  double t = 0, left = 0, right = 0;
+  int reference_line = 0;
+  std::size_t reference_pieces = 0;
+  for (std::size_t i = 0; i < table.rows.size(); ++i) {
+    const csv::Row& row = table.rows[i];
+    const double ti = row.number(0), li = row.number(1), ri = row.number(2);
+    for (std::size_t c : {1, 2}) {
+      if (const std::string e = limits::check_length(row.number(c)); !e.empty()) {
+        csv::fail(log_file, row.line, row.meta->columns[c], e);
+      }
+    }
+    if (i > 0) {
+      if (!(ti > t)) csv::fail(log_file, row.line, "t", "time must increase strictly");
+      run.pieces.push_back({li - left, ri - right});
+      run.durations_s.push_back(ti - t);
+    }
+    t = ti, left = li, right = ri;
+    const bool has_x = !row.empty(3), has_y = !row.empty(4), has_theta = !row.empty(5);
+    if (has_x || has_y || has_theta) {
+      if (!(has_x && has_y && has_theta)) {
+        csv::fail(log_file, row.line, "x,y,theta", "a reference pose needs all of x, y and theta");
+      }
+      run.measured = {row.number(3), row.number(4), row.number(5)};
+      check_pose(log_file, row, 3);
+      reference_line = row.line;
+      reference_pieces = run.pieces.size();
+    }
+  }
+  if (reference_line == 0) {
+    csv::fail(log_file, table.rows.back().line, "x,y,theta", "the log has no reference pose");
+  }
+  run.pieces.resize(reference_pieces);  // the model covers the path up to the last reference
+  run.durations_s.resize(reference_pieces);
+  return run;
+}
+
+}  // namespace
+
+MeasurementNoise parse_measurement_noise(const YAML::Node& node, const std::string& file,
+                                         const std::string& key) {
+  const Where where{file, key};
+  yaml::require_map(where, node, {"xy", "theta_deg"});
+  MeasurementNoise m;
+  m.xy_m = yaml::optional_number(where, node, "xy").value_or(0.0);
+  m.theta_rad = yaml::optional_number(where, node, "theta_deg").value_or(0.0) * kDegToRad;
+  if (!(m.xy_m >= 0 && m.xy_m <= kMaxLength_m)) {
+    yaml::fail(where.child("xy"), node["xy"], "must be in [0, " + format_number(kMaxLength_m) + "] m");
+  }
+  if (!(m.theta_rad >= 0 && m.theta_rad <= kMaxMeasurementNoiseDeg * kDegToRad)) {
+    yaml::fail(where.child("theta_deg"), node["theta_deg"],
+               "must be in [0, " + format_number(kMaxMeasurementNoiseDeg) + "] deg");
+  }
+  return m;
+}
+
+Suite load_suite_unguarded(const std::string& file);
+
+Suite load_suite(const std::string& file) {
+  return yaml::guarded(file, [&] { return load_suite_unguarded(file); });
+}
+
+Suite load_suite_unguarded(const std::string& file) {
+  const YAML::Node root = yaml::load_file(file);
+  const Where where{file, ""};
+  yaml::require_map(where, root,
+                    {"name", "robot", "measurement_noise", "model", "experiments"});
+  Suite suite;
+  suite.file = file;
+  suite.name = root["name"] ? yaml::to_string(where.child("name"), root["name"])
+                            : std::filesystem::path(file).stem().string();
+  suite.robot = parse_robot(yaml::require(where, root, "robot"), file, "robot");
+  if (const YAML::Node noise = root["measurement_noise"]) {
+    suite.measurement_noise = parse_measurement_noise(noise, file, "measurement_noise");
+  }
+  if (const YAML::Node model = root["model"]) {
+    yaml::require_map(where.child("model"), model, {"effects"});
+    if (model["effects"]) suite.model_effects = parse_effects(model["effects"], file, "model.effects");
+  }
+  const Where ew = where.child("experiments");
+  const YAML::Node list = yaml::require(where, root, "experiments");
+  yaml::require_sequence(ew, list);
+  if (list.size() == 0) yaml::fail(ew, list, "need at least one experiment");
+  const std::filesystem::path dir = std::filesystem::path(file).parent_path();
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const Where xw = ew.index(i);
+    const YAML::Node node = list[i];
+    yaml::require_map(xw, node, {"name", "path", "measurements", "logs", "group"});
+    SuiteExperiment ex;
+    ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
+    if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate experiment name");
+    if (node["group"]) {
+      ex.group = yaml::to_string(xw.child("group"), node["group"]);
+      if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
+    }
+    const bool has_measurements = node["measurements"].IsDefined();
+    const bool has_logs = node["logs"].IsDefined();
+    if (has_measurements == has_logs) {
+      yaml::fail(xw, node, "give either 'path' with 'measurements', or 'logs'");
+    }
+    if (has_measurements) {
+      ex.path = parse_path(yaml::require(xw, node, "path"), file, xw.child("path").key,
+                           suite.robot.wheelbase_m);
+      const std::string csv_file =
+          (dir / yaml::to_string(xw.child("measurements"), node["measurements"])).string();
+      ex.runs = load_measurements(csv_file);
+    } else {
+      if (node["path"]) yaml::fail(xw.child("path"), node["path"], "logged runs carry their own path");
+      ex.logged = true;
+      const Where lw = xw.child("logs");
+      yaml::require_sequence(lw, node["logs"]);
+      if (node["logs"].size() == 0) yaml::fail(lw, node["logs"], "need at least one log");
+      std::set<std::string> ids;
+      for (std::size_t j = 0; j < node["logs"].size(); ++j) {
+        const std::string log = (dir / yaml::to_string(lw.index(j), node["logs"][j])).string();
+        SuiteRun run = load_log(log);
+        if (const std::string e = limits::check_pieces(run.pieces, suite.robot.wheelbase_m); !e.empty()) {
+          throw InputError(log, 0, "", e + " (at the suite's wheelbase)");
+        }
+        if (!ids.insert(run.id).second) yaml::fail(lw.index(j), node["logs"][j], "duplicate log");
+        ex.runs.push_back(std::move(run));
+      }
+    }
+    suite.experiments.push_back(std::move(ex));
+  }
+  return suite;
+}
+
+
+}  // namespace odomcov

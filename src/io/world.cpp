@@ -1,0 +1,134 @@
+#include "odomcov/io/world.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <filesystem>
+#include <regex>
+#include <set>
+
+#include "odomcov/base/format.hpp"
+#include "odomcov/engine/simulator.hpp"
+#include "odomcov/io/suite_writer.hpp"
+#include "odomcov/io/config_io.hpp"
+#include "base/random.hpp"
+#include "io/config_yaml.hpp"
+#include "io/yaml_util.hpp"
+
+namespace odomcov {
+namespace {
+
+using yaml::Where;
+
+}  // namespace
+
+WorldFile load_world_unguarded(const std::string& file);
+
+WorldFile load_world(const std::string& file) {
+  return yaml::guarded(file, [&] { return load_world_unguarded(file); });
+}
+
+WorldFile load_world_unguarded(const std::string& file) {
+  const YAML::Node root = yaml::load_file(file);
+  const Where where{file, ""};
+  yaml::require_map(where, root,
+                    {"name", "robot", "world", "measurement_noise", "seed", "experiments"});
+  WorldFile w;
+  w.file = file;
+  w.name = root["name"] ? yaml::to_string(where.child("name"), root["name"])
+                        : std::filesystem::path(file).stem().string();
+  w.robot = parse_robot(yaml::require(where, root, "robot"), file, "robot");
+  w.world.noise = w.robot.noise;
+  if (root["world"]) w.world = parse_world(root["world"], file, "world", w.robot.noise);
+  if (const YAML::Node noise = root["measurement_noise"]) {
+    w.measurement_noise = parse_measurement_noise(noise, file, "measurement_noise");
+  }
+  if (root["seed"]) w.seed = yaml::to_unsigned(where.child("seed"), root["seed"]);
+  const Where ew = where.child("experiments");
+  const YAML::Node list = yaml::require(where, root, "experiments");
+  yaml::require_sequence(ew, list);
+  if (list.size() == 0) yaml::fail(ew, list, "need at least one experiment");
+  static const std::regex safe_name("[A-Za-z0-9_.-]+");
+  std::set<std::string> names;
+  std::int64_t total_runs = 0;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const Where xw = ew.index(i);
+    const YAML::Node node = list[i];
+    yaml::require_map(xw, node, {"name", "runs", "path", "group"});
+    WorldExperiment ex;
+    ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
+    if (!std::regex_match(ex.name, safe_name)) {
+      yaml::fail(xw.child("name"), node["name"], "use letters, digits, '_', '.' or '-' (it names a file)");
+    }
+    if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate name");
+    if (node["group"]) {
+      ex.group = yaml::to_string(xw.child("group"), node["group"]);
+      if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
+    }
+    ex.runs = yaml::to_integer(xw.child("runs"), yaml::require(xw, node, "runs"), 2, kMaxWorldRuns);
+    total_runs += ex.runs;
+    if (total_runs > kMaxWorldRuns) {
+      yaml::fail(xw.child("runs"), node["runs"],
+                 "the experiments up to this one have " + std::to_string(total_runs) +
+                     " runs in all, more than the limit of " + std::to_string(kMaxWorldRuns));
+    }
+    ex.path = parse_path(yaml::require(xw, node, "path"), file, xw.child("path").key,
+                         w.robot.wheelbase_m);
+    check_simulation_size(file, yaml::line_of(node["runs"]), xw.child("runs").key, ex.runs,
+                          sample_count(ex.path));
+    ex.path_yaml = YAML::Dump(node["path"]);
+    w.experiments.push_back(std::move(ex));
+  }
+  return w;
+}
+
+std::vector<Vector3> synthesize(const WorldFile& w, std::size_t experiment, int threads) {
+  const WorldExperiment& ex = w.experiments.at(experiment);
+  const std::uint64_t seed = random::derive_seed(w.seed, experiment);
+  SuiteExperiment as_suite;
+  as_suite.name = ex.name;
+  as_suite.group = ex.group;
+  const EffectList effects = group_effects(w.world.effects, w.seed, group_key(as_suite));
+  const Simulator simulator({w.robot.wheelbase_m, w.world.noise}, ex.path, effects);
+  const std::vector<Vector3> errors = simulator.errors(seed, 0, ex.runs, threads);
+  const Vector3 odometry = simulator.odometry_end_pose();
+  const auto key = random::key_from_seed(seed);
+  const Vector3 sigma(w.measurement_noise.xy_m, w.measurement_noise.xy_m,
+                      w.measurement_noise.theta_rad);
+  std::vector<Vector3> measured;
+  for (std::size_t r = 0; r < errors.size(); ++r) {
+    Vector3 pose = odometry + errors[r];
+    for (std::uint32_t c = 0; c < 3; ++c) {
+      if (sigma(c) > 0) pose(c) += sigma(c) * random::normal_at(key, r, c, random::kTagMeasurement);
+    }
+    pose.z() = wrap_angle(pose.z());
+    measured.push_back(pose);
+  }
+  return measured;
+}
+
+SuiteDocument world_suite(const WorldFile& w) {
+  SuiteDocument doc;
+  doc.comments = {"Measurement suite written by `odomcov synth` from " +
+                  std::filesystem::path(w.file).filename().string()};
+  doc.name = w.name;
+  doc.robot = w.robot;
+  doc.measurement_noise = w.measurement_noise;
+  for (const WorldExperiment& ex : w.experiments) {
+    doc.experiments.push_back({ex.name, ex.path_yaml, ex.name + ".csv", {}, ex.group});
+  }
+  return doc;
+}
+
+std::string suite_yaml(const WorldFile& w) { return suite_yaml(world_suite(w)); }
+
+std::string measurements_csv(const std::vector<Vector3>& measured) {
+  std::string text = "run,x,y,theta\n";
+  for (std::size_t r = 0; r < measured.size(); ++r) {
+    text += std::to_string(r + 1) + "," + format_number(measured[r].x(), "%.17g") + "," +
+            format_number(measured[r].y(), "%.17g") + "," + format_number(measured[r].z(), "%.17g") + "\n";
+  }
+  return text;
+}
+
+}  // namespace odomcov

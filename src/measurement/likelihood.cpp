@@ -1,0 +1,228 @@
+#include "odomcov/measurement/likelihood.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <string>
+
+#include "odomcov/closed_form/limits.hpp"
+#include "odomcov/engine/propagation.hpp"
+#include "odomcov/engine/second_order.hpp"
+#include "odomcov/engine/statistics.hpp"
+
+namespace odomcov {
+namespace {
+
+constexpr int kDim = 3;
+
+/// group_variation's terms for one run, to second order in the group's draw z ~ N(0, 1):
+///   f(value + sd z) = f + shift + column z + column2 q,   q = (z^2 - 1) / sqrt(2),
+/// with f the systematic mean (exact for the perturbed path at any order), shift = sd^2 f''/2
+/// (the draw's average of the curvature: a line that a drawn Ed turns by theta is shorter by
+/// d theta^2 / 6 whatever the sign), column = sd f' and column2 = sd^2 f'' / sqrt(2). q has unit
+/// variance and is uncorrelated with z, and the runs of a group share it as they share z. From
+/// the three points value and value +- h, h = sqrt(3) sd (Gauss-Hermite: the column is then
+/// E[f z] and the shift E[f] - f exactly for polynomials of degree 3 and 5), h kept within half
+/// the distance to the parameter's bounds. f at the value is `mean`: a logged run passes its
+/// prediction's (on fine pieces predict_with_order's mean is predict_mean's bit for bit; on
+/// pieces it cannot coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative),
+/// and its odometry end pose, which the shifted parameter does not change. Two mean-only
+/// propagations per run.
+struct GroupTerms {
+  Vector3 shift = Vector3::Zero(), column = Vector3::Zero(), column2 = Vector3::Zero();
+};
+
+GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
+                       const Robot& robot, const EffectList& effects, const GroupTarget& target,
+                       const Vector3& mid, const Vector3* odometry_end_pose = nullptr) {
+  if (!target.present || target.sd == 0.0) return {};
+  const double value = effects[target.effect].values[target.parameter];
+  const EffectParameterInfo& p = info_of(effects[target.effect])->parameters[target.parameter];
+  const double h = std::min({std::sqrt(3.0) * target.sd, 0.5 * (value - p.lower), 0.5 * (p.upper - value)});
+  EffectList shifted = effects;
+  shifted[target.effect].values[target.parameter] = value + h;
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
+  shifted[target.effect].values[target.parameter] = value - h;
+  const Vector3 down = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
+  const double sd2_h2 = target.sd * target.sd / (h * h);  // 1/3 unless h is cut by a bound
+  const Vector3 curvature = up + down - 2.0 * mid;        // h^2 f''
+  return {0.5 * sd2_h2 * curvature, target.sd * (up - down) / (2.0 * h),
+          sd2_h2 * curvature / std::sqrt(2.0)};
+}
+
+}  // namespace
+
+std::string second_order_problem(const Suite& suite, int order) {
+  if (order != 2) return "";
+  const double B = suite.robot.wheelbase_m;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    std::size_t most = 0;
+    if (!ex.logged) most = second_order_piece_count(model_pieces(ex.path, B), B);
+    for (const SuiteRun& run : ex.logged ? ex.runs : std::vector<SuiteRun>{}) {
+      most = std::max(most, second_order_piece_count(coarsen_pieces(run.pieces, B), B));
+    }
+    if (most > kMaxSecondOrderPieces) {
+      return ex.name + ": order 2 needs " + std::to_string(most) +
+             " quadrature pieces here, above the limit " + std::to_string(kMaxSecondOrderPieces) +
+             " (its cost is quadratic); use --order 1";
+    }
+  }
+  return "";
+}
+
+std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model) {
+  const double B = model.robot.wheelbase_m;
+  const Matrix3 meas = model.measurement_noise.covariance();
+  const GroupTarget target = group_target(model.effects);
+  std::map<std::string, int> groups;
+  std::vector<std::vector<RunResidual>> out(suite.experiments.size());
+  // Every unit of work: a planned-path experiment (one prediction serves all its runs) or one
+  // logged run. They run in parallel over the whole suite (most logged experiments are single
+  // runs, so a loop per experiment would leave cores idle).
+  // Group indices are assigned serially first (in experiment order), so they do not depend on
+  // the thread schedule.
+  std::vector<std::pair<std::size_t, std::size_t>> work;
+  std::vector<int> group_of(suite.experiments.size());
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+    const SuiteExperiment& ex = suite.experiments[e];
+    group_of[e] = groups.emplace(group_key(ex), static_cast<int>(groups.size())).first->second;
+    out[e].resize(ex.runs.size());
+    if (!ex.logged) {
+      work.emplace_back(e, 0);
+      continue;
+    }
+    for (std::size_t r = 0; r < ex.runs.size(); ++r) work.emplace_back(e, r);
+  }
+  // The longest logged runs first, so that no core is left with a long one at the end (the
+  // results go to their own slots: the order changes no number).
+  auto length = [&](const std::pair<std::size_t, std::size_t>& w) {
+    const SuiteExperiment& ex = suite.experiments[w.first];
+    return ex.logged ? ex.runs[w.second].pieces.size() : std::size_t{0};
+  };
+  std::stable_sort(work.begin(), work.end(), [&](const auto& a, const auto& b) { return length(a) > length(b); });
+  tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
+    const auto [e, r] = work[w];
+    const SuiteExperiment& ex = suite.experiments[e];
+    const int group = group_of[e];
+    if (ex.logged) {
+      const SuiteRun& run = ex.runs[r];
+      const Prediction p =
+          predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
+      const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects,
+                                       target, p.mean, &p.odometry_end_pose);
+      out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
+                   p.cov + meas, g.column, group, g.column2};
+      return;
+    }
+    std::vector<double> durations;
+    const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
+    const Prediction p = predict_with_order(pieces, durations, model.robot, model.effects, model.order);
+    const GroupTerms g =
+        group_terms(pieces, durations, model.robot, model.effects, target,
+                    target.present ? predict_mean(pieces, durations, model.robot, model.effects)
+                                   : Vector3::Zero());
+    const Vector3 odometry = sampled_end_pose(ex.path, B);
+    for (std::size_t i = 0; i < ex.runs.size(); ++i) {
+      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean + g.shift,
+                   p.cov + meas, g.column, group, g.column2};
+    }
+  }, tbb::simple_partitioner());
+  return out;
+}
+
+std::vector<std::vector<RunResidual>> condition_on_groups(
+    const std::vector<std::vector<RunResidual>>& res) {
+  struct Posterior {
+    Eigen::Vector2d m = Eigen::Vector2d::Zero();  // of the group's constants (z, q)
+    Eigen::Matrix2d v = Eigen::Matrix2d::Identity();
+  };
+  std::map<int, Posterior> posteriors;
+  std::vector<std::vector<RunResidual>> out = res;
+  for (auto& ex : out) {
+    for (RunResidual& r : ex) {
+      if (r.group_column.isZero(0.0) && r.group_column2.isZero(0.0)) continue;
+      Eigen::Matrix<double, 3, 2> U;
+      U << r.group_column, r.group_column2;
+      Posterior& g = posteriors[r.group];
+      const Eigen::LLT<Matrix3> llt(r.cov);
+      const bool whitens = llt.info() == Eigen::Success && r.cov.allFinite() && U.allFinite();
+      r.mean += U * g.m;
+      const Vector3 residual = r.error - r.mean;
+      r.cov += U * g.v * U.transpose();
+      r.group_column.setZero();
+      r.group_column2.setZero();
+      if (!whitens || !residual.allFinite()) continue;  // compare calls such a run untestable
+      const Eigen::Matrix<double, 3, 2> A = llt.matrixL().solve(U);
+      const Vector3 b = llt.matrixL().solve(residual);
+      // (v^-1 + A'A)^-1 = (I + v A'A)^-1 v: the 2x2 Woodbury step (rank one: the scalar gain).
+      const Eigen::Matrix2d gain =
+          (Eigen::Matrix2d::Identity() + g.v * A.transpose() * A).partialPivLu().solve(g.v);
+      g.m += gain * (A.transpose() * b);
+      g.v = 0.5 * (gain + gain.transpose());
+    }
+  }
+  return out;
+}
+
+std::vector<std::vector<RunResidual>> marginal(const std::vector<std::vector<RunResidual>>& res) {
+  std::vector<std::vector<RunResidual>> out = res;
+  for (auto& ex : out) {
+    for (RunResidual& r : ex) {
+      r.cov += r.group_column * r.group_column.transpose() +
+               r.group_column2 * r.group_column2.transpose();
+      r.group_column.setZero();
+      r.group_column2.setZero();
+    }
+  }
+  return out;
+}
+
+std::vector<double> run_log_likelihoods(const std::vector<std::vector<RunResidual>>& res,
+                                        bool scatter) {
+  std::vector<double> out;
+  if (!scatter) {
+    for (const auto& ex : condition_on_groups(res)) {
+      for (const RunResidual& r : ex) out.push_back(gaussian_log_density(r.error, r.mean, r.cov));
+    }
+    return out;
+  }
+  for (const auto& ex : res) {
+    const double n = static_cast<double>(ex.size());
+    Vector3 mean = Vector3::Zero();
+    for (const RunResidual& r : ex) mean += (r.error - r.mean) / n;
+    for (const RunResidual& r : ex) {
+      const Eigen::LLT<Matrix3> llt(r.cov);
+      if (ex.size() < 2) {
+        out.push_back(0.0);  // a lone run says nothing about the spread
+      } else if (llt.info() != Eigen::Success) {
+        out.push_back(-std::numeric_limits<double>::infinity());
+      } else {
+        const Vector3 d = r.error - r.mean - mean;
+        const Eigen::Matrix3d L = llt.matrixL();
+        const double log_det = 2.0 * L.diagonal().array().log().sum() + kDim * std::log(2.0 * M_PI);
+        out.push_back(-0.5 * d.dot(llt.solve(d)) - 0.5 * (n - 1) / n * log_det);
+      }
+    }
+  }
+  return out;
+}
+
+double log_likelihood(const std::vector<std::vector<RunResidual>>& res) {
+  double sum = 0.0;
+  for (double v : run_log_likelihoods(res, false)) sum += v;
+  return sum;
+}
+
+double scatter_log_likelihood(const std::vector<std::vector<RunResidual>>& res) {
+  double sum = 0.0;
+  for (double v : run_log_likelihoods(res, true)) sum += v;
+  return sum;
+}
+
+
+}  // namespace odomcov
