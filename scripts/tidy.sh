@@ -20,7 +20,7 @@ cd "$root"
 # by every file that includes it, so findings are de-duplicated.
 find src -name '*.cpp' -print0 | sort -z |
   xargs -0 -P "$(nproc)" -n 1 clang-tidy -p "$build" --quiet 2>/dev/null |
-  grep -E "(warning|error): " | sort -u > "$out" || true
+  grep -E "^[^ ]+:[0-9]+:[0-9]+: (warning|error): " | sort -u > "$out" || true
 if [ -s "$out" ]; then
   cat "$out"
   echo "tidy: $(wc -l < "$out") finding(s)" >&2
