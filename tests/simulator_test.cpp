@@ -167,6 +167,32 @@ TEST(Simulator, VectorKernelMatchesScalarReferenceBitForBit) {
   }
 }
 
+// A logged run is simulated one sample per encoder piece: given the pieces of a path's own
+// sample schedule (and their durations), it steps exactly as the path's simulation does, with
+// and without stochastic and speed-dependent effects.
+TEST(Simulator, LoggedPiecesStepAsThePathsSamples) {
+  const Path path{50.0, {{0, 0, 0}, {2, 2, 2}, {3, 1.6073, 2.3927}, {4.01, 3.5708, 3.5708}}};
+  std::vector<ArcSegment> pieces;
+  std::vector<double> durations;
+  for (const SampleRun& s : sample_schedule(path)) {
+    for (std::int64_t i = 0; i < s.count; ++i) {
+      pieces.push_back(s.increment);
+      durations.push_back(s.duration_s);
+    }
+  }
+  const Robot robot{0.5, {1e-3, 2e-3}};
+  for (const EffectList& effects :
+       {EffectList{}, EffectList{{"turn_slip", {0.002}}, {"per_run_radius", {0.003}}},
+        EffectList{{"turn_dependent_wheelbase", {1.01, 0.98}}, {"bumps", {2.0, 0.004}}}}) {
+    const Simulator by_path(robot, path, effects);
+    const Simulator by_pieces(robot, pieces, durations, effects);
+    EXPECT_EQ(by_pieces.samples_per_run(), by_path.samples_per_run());
+    EXPECT_EQ(by_pieces.odometry_end_pose(), by_path.odometry_end_pose());
+    EXPECT_EQ(by_pieces.errors(3, 0, 20, 1), by_path.errors(3, 0, 20, 1));
+  }
+  EXPECT_THROW(Simulator(robot, pieces, {1.0, 2.0}), std::invalid_argument);
+}
+
 TEST(Simulator, StreamingStatisticsMatchStoredErrors) {
   const Path path{100.0, {{0, 0, 0}, {1, 1.0, 1.2}, {2, 0.5, 2.0}}};
   const Simulator sim({0.4, {2e-3, 1e-3}}, path);

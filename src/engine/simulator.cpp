@@ -9,6 +9,8 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <stdexcept>
 
 #include "effects/effect.hpp"
 #include "base/random.hpp"
@@ -224,7 +226,7 @@ struct Simulator::Impl {
   /// leg of equal samples when no effect depends on the history, else sample by sample with
   /// equal neighbours merged (a leg of a planned path then splits only where the factors
   /// change, e.g. while backlash is taken up). Built once per path, never per run.
-  static std::vector<Leg> make_legs(const Path& path, const Robot& robot,
+  static std::vector<Leg> make_legs(const std::vector<SampleRun>& schedule, const Robot& robot,
                                     const std::vector<std::unique_ptr<effects::Effect>>& list) {
     effects::Dependence dependence = effects::Dependence::none;
     for (const auto& e : list) dependence = std::max(dependence, e->dependence());
@@ -237,7 +239,7 @@ struct Simulator::Impl {
     effects::MotionTracker tracker(robot.wheelbase_m);
     std::vector<Leg> out;
     effects::Systematic last;
-    for (const SampleRun& run : sample_schedule(path)) {
+    for (const SampleRun& run : schedule) {
       const ArcSegment& inc = run.increment;
       if (!per_sample) {
         const effects::Motion m = tracker.next(inc.left_m, inc.right_m, run.duration_s, run.count);
@@ -258,13 +260,13 @@ struct Simulator::Impl {
     return out;
   }
 
-  Impl(const Robot& r, const Path& path, const EffectList& effect_list)
+  Impl(const Robot& r, const std::vector<SampleRun>& schedule, const EffectList& effect_list)
       : robot(r), effects(effects::instantiate(effect_list)) {
     for (std::size_t e = 0; e < effects.size(); ++e) {
       if (effects[e]->stochastic()) random_effects.push_back(static_cast<std::uint32_t>(e));
       if (effects[e]->measures()) measuring.push_back(effects[e].get());
     }
-    legs = make_legs(path, robot, effects);
+    legs = make_legs(schedule, robot, effects);
     double max_travel = 0.0;
     for (const Leg& leg : legs) {
       samples += leg.count;
@@ -279,7 +281,7 @@ struct Simulator::Impl {
     // no effects and k = 0 the error is exactly zero.
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
     std::uint32_t n = 0;
-    for (const Leg& leg : make_legs(path, robot, {})) {
+    for (const Leg& leg : make_legs(schedule, robot, {})) {
       for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
         step(p, leg, 0.0, 0.0);
         if ((n & kRenormMask) == kRenormMask) renormalise(p);
@@ -426,7 +428,31 @@ Simulator::Impl::vector_group(const random::Philox::key_type& key, std::uint64_t
 }
 
 Simulator::Simulator(const Robot& robot, const Path& path, const EffectList& effects)
-    : impl_(std::make_unique<Impl>(robot, path, effects)) {}
+    : impl_(std::make_unique<Impl>(robot, sample_schedule(path), effects)) {}
+
+namespace {
+
+/// A logged run's schedule: one sample per encoder piece, of the piece's duration.
+std::vector<SampleRun> piece_schedule(const std::vector<ArcSegment>& pieces,
+                                      const std::vector<double>& durations_s) {
+  if (!durations_s.empty() && durations_s.size() != pieces.size()) {
+    throw std::invalid_argument("Simulator: " + std::to_string(durations_s.size()) +
+                                " durations for " + std::to_string(pieces.size()) + " pieces");
+  }
+  std::vector<SampleRun> schedule;
+  schedule.reserve(pieces.size());
+  for (std::size_t i = 0; i < pieces.size(); ++i) {
+    const double dt = durations_s.empty() ? std::numeric_limits<double>::quiet_NaN() : durations_s[i];
+    schedule.push_back({1, pieces[i], dt});
+  }
+  return schedule;
+}
+
+}  // namespace
+
+Simulator::Simulator(const Robot& robot, const std::vector<ArcSegment>& pieces,
+                     const std::vector<double>& durations_s, const EffectList& effects)
+    : impl_(std::make_unique<Impl>(robot, piece_schedule(pieces, durations_s), effects)) {}
 Simulator::~Simulator() = default;
 Simulator::Simulator(Simulator&&) noexcept = default;
 Simulator& Simulator::operator=(Simulator&&) noexcept = default;

@@ -32,6 +32,11 @@ class Simulator {
   /// `effects`: the world's effects. Systematic effects are folded into the path; stochastic
   /// ones (noise correlation, slip, per-run radius, bumps) run in a general scalar kernel.
   Simulator(const Robot& robot, const Path& path, const EffectList& effects = {});
+  /// A logged run (SuiteRun::pieces): one sample per encoder piece, of the piece's duration
+  /// (`durations_s` empty: unknown, so speed- and time-dependent effects see NaN), so the
+  /// simulated run steps exactly as the model's prediction of that run resolves it.
+  Simulator(const Robot& robot, const std::vector<ArcSegment>& pieces,
+            const std::vector<double>& durations_s, const EffectList& effects = {});
   ~Simulator();
   Simulator(Simulator&&) noexcept;
   Simulator& operator=(Simulator&&) noexcept;
