@@ -104,23 +104,31 @@ struct Systematic {
 /// t, s or the reversal state, evaluated per sample).
 enum class Dependence { none = 0, increment = 1, history = 2 };
 
-/// What an effect keeps from one sample to the next within a run (per-run constants, the
-/// distance to the next bump); zeroed by the simulator before begin_run.
+/// What an effect keeps from one run to the next sample (per-run constants, the distance to the
+/// next event); zeroed by the simulator before begin_run.
 struct RunState {
   double value[4] = {0.0, 0.0, 0.0, 0.0};
 };
 
-/// One sample on the world side as the per-sample hook sees it.
-struct WorldSample {
-  std::uint32_t index = 0;        // sample index within the run
-  double encoder_left = 0.0;      // encoder increments
+/// A leg of the world side (a stretch of equal samples) as a stochastic effect sees it.
+struct LegView {
+  double encoder_left = 0.0;      // encoder increments per sample
   double encoder_right = 0.0;
   double wheelbase_nominal = 0.0;
-  double travel_left = 0.0;       // systematic true travel (scale x encoder + offset)
+  double travel_left = 0.0;       // systematic true travel per sample (scale x encoder + offset)
   double travel_right = 0.0;
-  double wheelbase = 0.0;         // true wheelbase of this sample
-  double extra_left = 0.0;        // output: travel the effect adds to each wheel
-  double extra_right = 0.0;
+  double wheelbase = 0.0;         // true wheelbase of the leg's samples
+};
+
+/// One term of a sample's extra wheel travel: travel[wheel] gets (value x a) x b added, where
+/// value is the effect's per-run value `index` (RunState::value, set by begin_run) or its
+/// per-sample standard normal `index` (drawn at Draws::normal(sample, index)). a and b are the
+/// leg's coefficients (two, so an effect keeps the rounding of its own formula).
+struct TravelTerm {
+  int wheel = 0;          // 0 left, 1 right
+  bool per_run = false;   // value from RunState (true) or a per-sample normal (false)
+  std::uint32_t index = 0;
+  double a = 1.0, b = 1.0;
 };
 
 /// One constant-curvature piece on the model side. The engine fills the inputs, the plain
@@ -177,13 +185,33 @@ class Effect {
   }
 
   // ---- World side: randomness -----------------------------------------------------------------
+  // The simulator runs these for a block of runs at once in SIMD lanes (and run by run in its
+  // scalar reference, with the same arithmetic), so an effect states what it does per leg rather
+  // than acting per sample. Per sample and run, in the order the effects are listed:
+  //   1. the wheels' standard normals (z_L, z_R) are mixed by every `noise_mix`;
+  //   2. each effect's `terms` for the leg add to the wheels' extra travel, and an effect with
+  //      `events` counts RunState::value[0] down by the sample's mean wheel travel
+  //      (|dL| + |dR|)/2 and, when it reaches 0 or below, handles the event by `event`;
+  //   3. true travel = systematic travel + sigma z + extra.
   /// True when the hooks below do anything (the simulator then runs its general kernel).
   virtual bool stochastic() const { return false; }
+  /// Per-run values (per lane, once per run), e.g. per-run normals or the first event's distance.
   virtual void begin_run(RunState& state, const Draws& draws) const { (void)state, (void)draws; }
-  /// Acts on the standard normals of the two wheels' noise before they are scaled.
-  virtual void shape_noise(double& z_left, double& z_right) const { (void)z_left, (void)z_right; }
-  virtual void perturb(WorldSample& sample, RunState& state, const Draws& draws) const {
-    (void)sample, (void)state, (void)draws;
+  /// Mixes the standard normals of the two wheels' noise before they are scaled:
+  /// z_R <- from_left z_L + from_right z_R. Returns false when the effect does not mix.
+  virtual bool noise_mix(double& from_left, double& from_right) const {
+    (void)from_left, (void)from_right;
+    return false;
+  }
+  /// The terms this effect adds to each sample of a leg (none: the leg is untouched and draws
+  /// nothing for this effect).
+  virtual void terms(const LegView& leg, std::vector<TravelTerm>& out) const { (void)leg, (void)out; }
+  /// Rare events along the travel (see above): `event` adds the event's travel to the wheels
+  /// and moves RunState::value[0] on to the next event, drawing from `draws` at `sample`.
+  virtual bool events() const { return false; }
+  virtual void event(std::uint32_t sample, RunState& state, const Draws& draws, double& extra_left,
+                     double& extra_right) const {
+    (void)sample, (void)state, (void)draws, (void)extra_left, (void)extra_right;
   }
 
   // ---- Model side (first order in the effect) ------------------------------------------------

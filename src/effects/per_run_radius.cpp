@@ -16,9 +16,9 @@ class PerRunRadius final : public Effect {
     state.value[0] = sigma_ * draws.run_normal(0);
     state.value[1] = sigma_ * draws.run_normal(1);
   }
-  void perturb(WorldSample& s, RunState& state, const Draws&) const override {
-    s.extra_left += state.value[0] * s.travel_left;
-    s.extra_right += state.value[1] * s.travel_right;
+  void terms(const LegView& leg, std::vector<TravelTerm>& out) const override {
+    out.push_back({0, true, 0, leg.travel_left, 1.0});   // eps_L x travel_left
+    out.push_back({1, true, 1, leg.travel_right, 1.0});  // eps_R x travel_right
   }
   int run_constants() const override { return 2; }
   void model(PieceModel& piece) const override {
