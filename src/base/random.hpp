@@ -107,11 +107,13 @@ inline bool zig_fast(std::uint64_t bits, double& z) {
   return true;
 }
 
-/// The full ziggurat for a candidate rejected by zig_fast: the wedge test, the tail
-/// (Marsaglia's exponential method) and new candidates, drawing fresh bits at
-/// (run, sample, retry_base | k << kRetryShift) for attempts k = 1, 2, ...
+/// The full ziggurat for a candidate rejected by zig_fast: the wedge test (its exp is the
+/// polynomial of wedge_exp-inl.hpp, the same on every machine and instruction set), the tail
+/// (Marsaglia's exponential method, std::log) and new candidates, drawing fresh bits at
+/// (run, sample, retry_base | k << kRetryShift) for attempts k = 1, 2, ... (from
+/// `first_attempt` on: the SIMD kernel hands over a tail candidate at its attempt).
 double zig_slow(std::uint64_t bits, const Philox::key_type& key, std::uint64_t run,
-                std::uint32_t sample, std::uint32_t retry_base);
+                std::uint32_t sample, std::uint32_t retry_base, std::uint32_t first_attempt = 1);
 
 /// A standard normal from a 64-bit candidate (fast path, else the full method).
 inline double normal(std::uint64_t bits, const Philox::key_type& key, std::uint64_t run,

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "base/random.hpp"
@@ -49,6 +50,7 @@ struct EndPose {
 
 struct Plan {
   std::vector<Leg> legs;
+  std::uint32_t samples = 0;  // per run
   // The general kernel's data (empty without stochastic effects).
   std::vector<const effects::Effect*> stochastic;  // the effects with world-side randomness
   std::vector<std::uint32_t> slots;                // each one's index in the effect list
@@ -59,6 +61,18 @@ struct Plan {
 
   bool general() const { return !stochastic.empty(); }
 };
+
+/// The plan of a schedule of samples through these effects (which must outlive it): the legs
+/// with every systematic factor folded in, and the stochastic effects' operations per leg.
+Plan make_plan(const Robot& robot, const std::vector<SampleRun>& schedule,
+               const std::vector<std::unique_ptr<effects::Effect>>& effects);
+
+/// One run by the scalar reference kernel: plain C++, run by run, what every SIMD target must
+/// match bit for bit.
+EndPose reference_run(const Plan& plan, const random::Philox::key_type& key, std::uint64_t run);
+
+/// The plan's motion with zero noise (a plan without stochastic effects): the odometry.
+EndPose odometry_run(const Plan& plan);
 
 /// Runs first .. first+count-1 of the plan (count <= kMaxRuns), writing their end poses.
 using KernelFn = void (*)(const Plan& plan, const random::Philox::key_type& key,
