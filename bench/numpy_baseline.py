@@ -61,22 +61,27 @@ def simulate(runs, rng, dl, dr):
     return x, y, theta
 
 
+def best_rate(runs, repeats, dl, dr):
+    """Steps per second, the best of `repeats` simulations of `runs` runs."""
+    rng = np.random.default_rng(1)
+    simulate(64, rng, dl, dr)  # warm-up
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        x, _, _ = simulate(runs, rng, dl, dr)
+        best = min(best, time.perf_counter() - t0)
+        assert np.isfinite(x).all()
+    return runs * len(dl) / best
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=8192)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     dl, dr = encoder_increments()
-    rng = np.random.default_rng(1)
-    simulate(64, rng, dl, dr)  # warm-up
-    best = float("inf")
-    for _ in range(args.repeats):
-        t0 = time.perf_counter()
-        x, _, _ = simulate(args.runs, rng, dl, dr)
-        best = min(best, time.perf_counter() - t0)
-        assert np.isfinite(x).all()
-    steps = args.runs * len(dl)
-    print(f"numpy_baseline: {steps / best / 1e6:.1f} M steps/s "
+    rate = best_rate(args.runs, args.repeats, dl, dr)
+    print(f"numpy_baseline: {rate / 1e6:.1f} M steps/s "
           f"({args.runs} runs x {len(dl)} samples, best of {args.repeats})")
 
 
