@@ -24,6 +24,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 #include "engine/lane_plan.hpp"
 
@@ -44,7 +45,7 @@ inline constexpr std::size_t kN = hn::MaxLanes(DF());
 inline constexpr std::size_t kK = kN >= 8 ? 4 : kN >= 4 ? 2 : 4;
 inline constexpr std::size_t kBlock = kN * kK;
 static_assert(kBlock <= kMaxRuns, "a block must fit the kernel's output");
-static_assert(kN <= 8, "a vector's mask must fit a byte");
+static_assert(kN <= 8 && kK <= 8, "a vector's mask must fit a byte, a row's a word");
 
 HWY_INLINE VF splat(double c) { return hn::Set(DF(), c); }
 
@@ -333,7 +334,7 @@ class Block {
   /// Marks slot `slot` of chunk sample s when the fast path rejected any of its lanes.
   HWY_INLINE void flag(std::uint32_t s, std::size_t slot) {
     std::uint64_t any = 0;
-    for (std::size_t k = 0; k < kK; ++k) any |= rejected_[s][slot][k];
+    std::memcpy(&any, &rejected_[s][slot][0], kK);
     const std::size_t bit = s * kSlots + slot;
     flags_[bit / 64] |= std::uint64_t{any != 0} << (bit % 64);
   }
@@ -348,14 +349,16 @@ class Block {
         const std::size_t s = bit / kSlots, slot = bit % kSlots;
         Rejects& q = *queue_;
         const std::uint64_t first = static_cast<std::uint64_t>(&z_[s][slot][0] - &z_[0][0][0]);
-        for (std::size_t k = 0; k < kK; ++k) {
-          // Lane by lane (they are few): cheaper than compressing whole vectors.
-          for (unsigned m = rejected_[s][slot][k]; m != 0; m &= m - 1) {
-            const std::size_t j = k * kN + hwy::Num0BitsBelowLS1Bit_Nonzero32(m);
-            q.bits[count] = bits_[s][slot][j];
-            q.at[count] = first + j;
-            ++count;
-          }
+        // Lane by lane (they are few: cheaper than compressing whole vectors), one loop over the
+        // row's kK mask bytes read as one word: bit 8 k + i is lane k kN + i.
+        std::uint64_t row = 0;
+        std::memcpy(&row, &rejected_[s][slot][0], kK);
+        for (; row != 0; row &= row - 1) {
+          const std::size_t bit = hwy::Num0BitsBelowLS1Bit_Nonzero64(row);
+          const std::size_t j = (bit / 8) * kN + bit % 8;
+          q.bits[count] = bits_[s][slot][j];
+          q.at[count] = first + j;
+          ++count;
         }
         if (HWY_UNLIKELY(count + kBlock > Rejects::kCapacity)) {
           queue_->count = count;
