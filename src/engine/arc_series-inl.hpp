@@ -5,6 +5,17 @@
 // arc_step.hpp's.
 // NOLINTBEGIN(llvm-header-guard)
 
+/// A pose as the step carries it: position, heading as a unit vector, heading angle. (Here and
+/// not in arc_step.hpp, so a SIMD target's poses are built under its own target options; the
+/// constructors are user-provided because GCC compiles implicit ones without them.)
+template <class V>
+struct Pose {
+  V x, y, c, s, theta;
+  inline __attribute__((always_inline)) Pose() {}
+  inline __attribute__((always_inline)) Pose(V x0, V y0, V c0, V s0, V theta0)
+      : x(x0), y(y0), c(c0), s(s0), theta(theta0) {}
+};
+
 /// The polynomials. `k` turns a double constant into a V (identity for scalars, a broadcast for
 /// vectors), so scalars and vectors evaluate the same expression tree.
 template <class V, class K>
@@ -29,8 +40,7 @@ inline __attribute__((always_inline)) V sinc_series(V h2, K k) {
 
 /// The rest of the step once cos h, sin h and sinc h are known.
 template <class V>
-inline __attribute__((always_inline)) void advance(::odomcov::arc::Pose<V>& p, V ds, V ch, V sh,
-                                                   V sinc, V h) {
+inline __attribute__((always_inline)) void advance(Pose<V>& p, V ds, V ch, V sh, V sinc, V h) {
   const V chord = ds * sinc;
   const V mc = p.c * ch - p.s * sh;
   const V ms = p.s * ch + p.c * sh;

@@ -46,11 +46,6 @@ struct LegStep {
   bool series_sinc = true;  // |h0| <= kSincSeriesMax: most lanes take the sinc series
 };
 
-template <class V>
-struct Pose {
-  V x, y, c, s, theta;
-};
-
 // The polynomials and the rest of the step, templates over the value type. They are in a file of
 // their own because a SIMD target must compile its own copy inside its target region (Highway's
 // HWY_BEFORE_NAMESPACE); the scalar copy is this one.

@@ -74,6 +74,9 @@ struct RoundKeys {
 /// Counter words in, output words out; w1 and w3 of the output keep garbage above bit 31.
 struct Words {
   VU w0, w1, w2, w3;
+  // User-provided: GCC compiles implicit constructors without the target's options (NEON).
+  HWY_INLINE Words() {}
+  HWY_INLINE Words(VU a, VU b, VU c, VU d) : w0(a), w1(b), w2(c), w3(d) {}
 };
 
 /// The 64-bit product of the lower 32 bits of each lane and m.
@@ -190,7 +193,8 @@ HWY_NOINLINE void zig_attempt(std::size_t vectors, const std::uint64_t* bits_in,
     }
     return;
   }
-  Words w[kK] = {};
+  Words w[kK];
+  for (std::size_t k = 0; k < kK; ++k) w[k] = {splat_u(0), splat_u(0), splat_u(0), splat_u(0)};
   for (std::size_t k = 0; k < vectors; ++k) {
     const VU runs = hn::Load(du, run + k * kN);
     w[k] = {hn::Load(du, sample + k * kN), hn::Load(du, tag + k * kN),
@@ -303,7 +307,7 @@ class Block {
   /// The steps of samples n .. n+count-1 from their normals; `at` moves past them. The poses
   /// are locals here, so they stay in registers.
   void step_chunk(LegCursor& at, std::uint32_t n, std::uint32_t count) {
-    arc::Pose<VF> p[kK];
+    Pose<VF> p[kK];
     for (std::size_t k = 0; k < kK; ++k) p[k] = p_[k];
     for (std::uint32_t s = 0; s < count;) {
       const Leg& leg = *at.leg;
@@ -354,8 +358,8 @@ class Block {
         std::uint64_t row = 0;
         std::memcpy(&row, &rejected_[s][slot][0], kK);
         for (; row != 0; row &= row - 1) {
-          const std::size_t bit = hwy::Num0BitsBelowLS1Bit_Nonzero64(row);
-          const std::size_t j = (bit / 8) * kN + bit % 8;
+          const std::size_t pos = hwy::Num0BitsBelowLS1Bit_Nonzero64(row);
+          const std::size_t j = (pos / 8) * kN + pos % 8;
           q.bits[count] = bits_[s][slot][j];
           q.at[count] = first + j;
           ++count;
@@ -451,7 +455,7 @@ class Block {
   }
 
   /// Sample n's step from the normals of chunk sample s.
-  HWY_INLINE void step_sample(arc::Pose<VF> (&p)[kK], const Leg& leg, std::uint32_t n,
+  HWY_INLINE void step_sample(Pose<VF> (&p)[kK], const Leg& leg, std::uint32_t n,
                               std::uint32_t s) {
     const DF df;
     VF noise_l[kK], noise_r[kK];
@@ -465,7 +469,7 @@ class Block {
   }
 
   /// The exact arc step on one vector; lanes outside the series bounds redo it in scalar code.
-  static HWY_INLINE void step(arc::Pose<VF>& p, const Leg& leg, VF noise_l, VF noise_r) {
+  static HWY_INLINE void step(Pose<VF>& p, const Leg& leg, VF noise_l, VF noise_r) {
     const auto c = [](double v) { return splat(v); };
     const VF eps = (noise_r - noise_l) * c(leg.inv_two_b);
     const VF ds = c(leg.center_m) + c(0.5) * (noise_l + noise_r);
@@ -494,7 +498,7 @@ class Block {
  private:
   /// Rare: some lane is outside the series bounds; the vector takes the scalar step
   /// lane by lane from the pre-step state (within the bounds it is the vector formula).
-  static HWY_NOINLINE void scalar_lanes(arc::Pose<VF>& p, const Leg& leg, VF noise_l,
+  static HWY_NOINLINE void scalar_lanes(Pose<VF>& p, const Leg& leg, VF noise_l,
                                         VF noise_r) {
     const DF df;
     alignas(64) double v[7][kN];
@@ -514,7 +518,7 @@ class Block {
          hn::Load(df, v[4])};
   }
 
-  static void renormalise(arc::Pose<VF> (&p)[kK]) {
+  static void renormalise(Pose<VF> (&p)[kK]) {
     for (std::size_t k = 0; k < kK; ++k) {
       const VF norm = hn::Sqrt(p[k].c * p[k].c + p[k].s * p[k].s);
       p[k].c = p[k].c / norm;
@@ -613,7 +617,7 @@ class Block {
   const RoundKeys keys_;
   const std::uint64_t first_;
   VU run_[kK], run_lo_[kK], run_hi_[kK];
-  arc::Pose<VF> p_[kK];
+  Pose<VF> p_[kK];
   Rejects rejects_[2];  // the slow path's queue and the next attempts', in turns
   Rejects* queue_ = &rejects_[0];
   std::uint32_t n0_ = 0;  // the chunk's first sample
