@@ -151,7 +151,13 @@ HWY_NOINLINE double part_step(const Plan& plan, const random::Philox::key_type& 
   return out[0].x;
 }
 
-HWY_NOINLINE double part_kernel(const Plan& plan, const random::Philox::key_type& key) {
+HWY_NOINLINE double part_plain(const Plan& plan, const random::Philox::key_type& key) {
+  EndPose out[kRuns];
+  run_blocks(plan, key, 0, kRuns, out);
+  return out[0].x;
+}
+
+HWY_NOINLINE double part_general(const Plan& plan, const random::Philox::key_type& key) {
   EndPose out[kRuns];
   run_blocks(plan, key, 0, kRuns, out);
   return out[0].x;
@@ -165,8 +171,8 @@ roofline::Parts measure(const roofline::Plans& plans, int repeats) {
   p.normals = best_of(repeats, steps, [&](const auto& key) { sink = sink + part_normals(*plans.plain, key); });
   p.fast = best_of(repeats, steps, [&](const auto& key) { sink = sink + part_fast(*plans.plain, key); });
   p.step = best_of(repeats, steps, [&](const auto& key) { sink = sink + part_step(*plans.plain, key); });
-  p.plain = best_of(repeats, steps, [&](const auto& key) { sink = sink + part_kernel(*plans.plain, key); });
-  p.general = best_of(repeats, steps, [&](const auto& key) { sink = sink + part_kernel(*plans.general, key); });
+  p.plain = best_of(repeats, steps, [&](const auto& key) { sink = sink + part_plain(*plans.plain, key); });
+  p.general = best_of(repeats, steps, [&](const auto& key) { sink = sink + part_general(*plans.general, key); });
   return p;
 }
 

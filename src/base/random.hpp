@@ -13,6 +13,16 @@
 //   kTagPerRun | e << 8       per-run draws of effect slot e (the counter's sample = draw number)
 //   kTagMeasurement           measurement noise of synthesised suites
 //   kTagGroup                 group_variation's draw per group (run = hash of the group name)
+//
+// The seed -> numbers mapping, in full (docs/performance.md; the SIMD kernels keep it exactly):
+// key = (seed bits 0-31, seed bits 32-63). A draw's four output words w0..w3 give two 64-bit
+// candidates, lo = w0 | w1 << 32 and hi = w2 | w3 << 32: a sample's left wheel normal comes from
+// lo and its right wheel normal from hi of the draw at kTagWheelNoise; a per-sample or per-run
+// normal of an effect from lo of its own draw. A candidate is a normal by ZIGNOR: block
+// i = bits 0-7, sign = bit 8, u = bits 12-63 / 2^52; accepted when u < ratio[i] (z = +-u x[i]),
+// else zig_slow: the wedge test with the polynomial exp of wedge_exp-inl.hpp (no C library
+// function, so every machine decides it alike), the tail by std::log, new candidates from the
+// retry draws. Test: Simulator.SeedGivesTheDocumentedBits pins three runs' bits.
 #pragma once
 
 #include <Random123/philox.h>
