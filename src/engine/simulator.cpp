@@ -191,6 +191,29 @@ inline __attribute__((always_inline)) VecD normals(VecU bits, const VecU& run,
   return z;
 }
 
+/// The vector kernel's rare fallback: the lanes marked in `special` (outside the series
+/// bounds) redo the sample with the scalar step from their pre-step state `before`, with the
+/// same wheel noise [m]; the other lanes keep the vector step's result in `p`.
+inline __attribute__((always_inline)) void scalar_step_lanes(State<VecD>& p, const State<VecD>& before,
+                                                             const VecI& special, const Leg& leg,
+                                                             const VecD& noise_l, const VecD& noise_r) {
+  for (int j = 0; j < kLanes; ++j) {
+    if (!special[j]) continue;
+    State<double> q{before.x[j], before.y[j], before.c[j], before.s[j], before.theta[j]};
+    step(q, leg, noise_l[j], noise_r[j]);
+    p.x[j] = q.x, p.y[j] = q.y, p.c[j] = q.c, p.s[j] = q.s, p.theta[j] = q.theta;
+  }
+}
+
+/// renormalise, lane by lane: each heading vector (c, s) back to unit length.
+inline __attribute__((always_inline)) void renormalise_lanes(State<VecD>& p) {
+  for (int j = 0; j < kLanes; ++j) {
+    const double norm = std::sqrt(p.c[j] * p.c[j] + p.s[j] * p.s[j]);
+    p.c[j] /= norm;
+    p.s[j] /= norm;
+  }
+}
+
 }  // namespace
 
 struct Simulator::Impl {
@@ -408,20 +431,9 @@ Simulator::Impl::vector_group(const random::Philox::key_type& key, std::uint64_t
         // Rare: lanes outside the series bounds take the scalar step from the pre-step state.
         const State<VecD> before = p;
         advance(p, ds, ch, sh, sinc, h);
-        for (int j = 0; j < kLanes; ++j) {
-          if (!special[j]) continue;
-          State<double> q{before.x[j], before.y[j], before.c[j], before.s[j], before.theta[j]};
-          step(q, leg, noise_l[j], noise_r[j]);
-          p.x[j] = q.x, p.y[j] = q.y, p.c[j] = q.c, p.s[j] = q.s, p.theta[j] = q.theta;
-        }
+        scalar_step_lanes(p, before, special, leg, noise_l, noise_r);
       }
-      if ((n & kRenormMask) == kRenormMask) {
-        for (int j = 0; j < kLanes; ++j) {
-          const double norm = std::sqrt(p.c[j] * p.c[j] + p.s[j] * p.s[j]);
-          p.c[j] /= norm;
-          p.s[j] /= norm;
-        }
-      }
+      if ((n & kRenormMask) == kRenormMask) renormalise_lanes(p);
     }
   }
   for (int j = 0; j < kLanes; ++j) out[j] = error_of(p.x[j], p.y[j], p.theta[j]);
