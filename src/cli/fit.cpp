@@ -23,36 +23,25 @@ struct FitOptions {
   bool exact = false;
 };
 
-int run_fit(const FitOptions& opt) {
-  if (!opt.json.empty()) check_output_path(opt.json);
-  if (opt.params.empty()) throw UsageError("--params needs at least one parameter");
-  check_order(opt.order);
-  const Suite suite = load_suite(opt.suite);
-  check_second_order_size(suite, opt.order);
-  // After loading: the suite's custom effects' parameters can be fitted too.
-  for (std::size_t i = 0; i < opt.params.size(); ++i) {
-    if (const std::string e = check_fit_parameter(opt.params[i], suite.model_effects); !e.empty()) {
+/// Every --params name must be fittable in the suite (its custom effects' parameters
+/// included) and given once.
+void check_params(const std::vector<std::string>& params, const Suite& suite) {
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    if (const std::string e = check_fit_parameter(params[i], suite.model_effects); !e.empty()) {
       throw UsageError("--params: " + e);
     }
     for (std::size_t j = 0; j < i; ++j) {
-      if (opt.params[j] == opt.params[i]) throw UsageError("--params: " + opt.params[i] + " given twice");
+      if (params[j] == params[i]) throw UsageError("--params: " + params[i] + " given twice");
     }
   }
-  SuiteModel model = suite_model(suite);
-  model.order = opt.order;
-  check_finite_start(suite, model, "fit");
-  std::atomic<std::int64_t> evaluations{0};
-  ProgressBar bar([&evaluations] { return evaluations.load(); },
-                  std::function<std::int64_t()>([] { return std::int64_t{0}; }),
-                  "likelihood evaluations");
-  const FitResult r = fit(suite, model, opt.params, Likelihood::full, &evaluations,
-                            opt.exact ? FitPath::exact : FitPath::fast);
-  bar.finish();
+}
 
+/// The report on stdout: each estimate with its (robust) standard error, the log-likelihood
+/// before and after, the warnings and the fitted model's YAML.
+std::string fit_report(const Suite& suite, const FitResult& r) {
   std::ostringstream out;
   out << "odomcov fit: " << suite.name << " (" << suite.experiments.size()
       << " experiments), maximum likelihood\n";
-  json parameters = json::object(), stderrs = json::object(), robust = json::object();
   for (std::size_t i = 0; i < r.names.size(); ++i) {
     const auto k = static_cast<Eigen::Index>(i);
     const double se = r.stderrs(k);
@@ -63,36 +52,72 @@ int run_fit(const FitOptions& opt) {
         << (std::isfinite(se) ? " +/- " + sci(se, 2) + " (robust +/- " + sci(rse, 2) + ")"
                               : std::string(" (no standard error)"))
         << "\n";
-    parameters[r.names[i]] = r.values(k);
-    stderrs[r.names[i]] = std::isfinite(se) ? json(se) : json(nullptr);
-    robust[r.names[i]] = std::isfinite(rse) ? json(rse) : json(nullptr);
   }
   out << "log-likelihood: " << fixed(r.log_likelihood_before, 3) << " before, "
       << fixed(r.log_likelihood_after, 3) << " after (" << r.evaluations << " evaluations)\n";
   for (const std::string& w : r.warnings) out << "warning: " << w << "\n";
   out << "the fitted model, to paste over the suite's robot line and model block:\n"
       << model_yaml(r.model);
-  std::cout << out.str();
-  if (!opt.json.empty()) {
-    json corr = json::array();
-    for (Eigen::Index i = 0; i < r.covariance.rows(); ++i) {
-      json row = json::array();
-      for (Eigen::Index j = 0; j < r.covariance.cols(); ++j) {
-        const double c = r.covariance(i, j) / std::sqrt(r.covariance(i, i) * r.covariance(j, j));
-        row.push_back(std::isfinite(c) ? json(c) : json(nullptr));
-      }
-      corr.push_back(row);
+  return out.str();
+}
+
+/// A finite number as JSON; null otherwise (no standard error, undefined correlation).
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+/// The estimates' correlation matrix (rows of the covariance scaled by the standard errors).
+json correlation_json(const Eigen::MatrixXd& covariance) {
+  json corr = json::array();
+  for (Eigen::Index i = 0; i < covariance.rows(); ++i) {
+    json row = json::array();
+    for (Eigen::Index j = 0; j < covariance.cols(); ++j) {
+      row.push_back(finite_or_null(covariance(i, j) / std::sqrt(covariance(i, i) * covariance(j, j))));
     }
-    write_json_atomic(opt.json, {{"parameters", parameters},
-                                 {"stderr", stderrs},
-                                 {"stderr_robust", robust},
-                                 {"correlation", corr},
-                                 {"log_likelihood_before", r.log_likelihood_before},
-                                 {"log_likelihood_after", r.log_likelihood_after},
-                                 {"evaluations", r.evaluations},
-                                 {"yaml", model_yaml(r.model)},
-                                 {"warnings", r.warnings}});
+    corr.push_back(row);
   }
+  return corr;
+}
+
+/// The JSON document of a fit: estimates, standard errors (plain and robust), correlations,
+/// log-likelihoods, evaluations, the model's YAML and the warnings.
+json fit_json(const FitResult& r) {
+  json parameters = json::object(), stderrs = json::object(), robust = json::object();
+  for (std::size_t i = 0; i < r.names.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    parameters[r.names[i]] = r.values(k);
+    stderrs[r.names[i]] = finite_or_null(r.stderrs(k));
+    robust[r.names[i]] = finite_or_null(r.robust_stderrs(k));
+  }
+  return {{"parameters", parameters},
+          {"stderr", stderrs},
+          {"stderr_robust", robust},
+          {"correlation", correlation_json(r.covariance)},
+          {"log_likelihood_before", r.log_likelihood_before},
+          {"log_likelihood_after", r.log_likelihood_after},
+          {"evaluations", r.evaluations},
+          {"yaml", model_yaml(r.model)},
+          {"warnings", r.warnings}};
+}
+
+int run_fit(const FitOptions& opt) {
+  if (!opt.json.empty()) check_output_path(opt.json);
+  if (opt.params.empty()) throw UsageError("--params needs at least one parameter");
+  check_order(opt.order);
+  const Suite suite = load_suite(opt.suite);
+  check_second_order_size(suite, opt.order);
+  // After loading: the suite's custom effects' parameters can be fitted too.
+  check_params(opt.params, suite);
+  SuiteModel model = suite_model(suite);
+  model.order = opt.order;
+  check_finite_start(suite, model, "fit");
+  std::atomic<std::int64_t> evaluations{0};
+  ProgressBar bar([&evaluations] { return evaluations.load(); },
+                  std::function<std::int64_t()>([] { return std::int64_t{0}; }),
+                  "likelihood evaluations");
+  const FitResult r = fit(suite, model, opt.params, Likelihood::full, &evaluations,
+                            opt.exact ? FitPath::exact : FitPath::fast);
+  bar.finish();
+  std::cout << fit_report(suite, r);
+  if (!opt.json.empty()) write_json_atomic(opt.json, fit_json(r));
   return kExitOk;
 }
 

@@ -48,38 +48,62 @@ std::array<double, 36> ros_covariance(const Matrix3& P, double unused) {
   return c;
 }
 
-int run_predict(const PredictOptions& opt) {
+/// The usage rules: writable outputs, the robot from exactly one source, a complete robot on
+/// the command line, --every >= 1 and usable wheel scales.
+void check_options(const PredictOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
   if (!opt.csv.empty()) check_output_path(opt.csv);
-  const int sources = (opt.wheelbase || opt.k_left || opt.k_right ? 1 : 0) + !opt.suite.empty() + !opt.config.empty();
+  const bool flags = opt.wheelbase || opt.k_left || opt.k_right;
+  const int sources = (flags ? 1 : 0) + !opt.suite.empty() + !opt.config.empty();
   if (sources != 1) throw UsageError("give the robot once: --wheelbase/--k-left/--k-right, --suite or --config");
   if (opt.wheelbase && !(opt.k_left && opt.k_right)) throw UsageError("--wheelbase needs --k-left and --k-right");
   if (!opt.wheelbase && (opt.k_left || opt.k_right)) throw UsageError("--k-left/--k-right need --wheelbase");
   if (opt.every < 1) throw UsageError("--every must be >= 1");
-  if (!(opt.left_scale != 0 && std::isfinite(opt.left_scale)) || !(opt.right_scale != 0 && std::isfinite(opt.right_scale))) {
-    throw UsageError("--left-scale and --right-scale must be finite and not 0");
-  }
+  const bool left_ok = opt.left_scale != 0 && std::isfinite(opt.left_scale);
+  const bool right_ok = opt.right_scale != 0 && std::isfinite(opt.right_scale);
+  if (!left_ok || !right_ok) throw UsageError("--left-scale and --right-scale must be finite and not 0");
+}
+
+/// The model to propagate: the robot and its effects, and where they came from (for the report).
+struct PredictModel {
   Robot robot;
   EffectList effects;
   std::string source;
+};
+
+/// The model from the command line's robot, a suite or a path config (check_options: one).
+PredictModel select_model(const PredictOptions& opt) {
+  PredictModel m;
   if (opt.wheelbase) {
-    robot = {*opt.wheelbase, {*opt.k_left, *opt.k_right}};
-    if (!(robot.wheelbase_m > 0) || !(robot.noise.k_left >= 0) || !(robot.noise.k_right >= 0)) {
+    m.robot = {*opt.wheelbase, {*opt.k_left, *opt.k_right}};
+    if (!(m.robot.wheelbase_m > 0) || !(m.robot.noise.k_left >= 0) || !(m.robot.noise.k_right >= 0)) {
       throw UsageError("--wheelbase must be > 0, --k-left and --k-right >= 0");
     }
-    source = "command line";
+    m.source = "command line";
   } else if (!opt.suite.empty()) {
     const Suite suite = load_suite(opt.suite);
-    robot = suite.robot;
-    effects = suite.model_effects;
-    source = opt.suite;
+    m.robot = suite.robot;
+    m.effects = suite.model_effects;
+    m.source = opt.suite;
   } else {
     const Config config = load_config(opt.config);
-    robot = config.robot;
-    effects = config.model_effects;
-    source = opt.config;
+    m.robot = config.robot;
+    m.effects = config.model_effects;
+    m.source = opt.config;
   }
-  const EncoderLog log = load_encoder_log(opt.log, opt.left_scale, opt.right_scale);
+  return m;
+}
+
+/// Per log sample (world frame, x, y [m], theta [rad]): the odometry pose, its covariance and,
+/// with effects, the predicted mean error.
+struct Track {
+  std::vector<Vector3> pose, mean;
+  std::vector<Matrix3> cov;
+};
+
+/// Propagates the model along the log, sample by sample: the closed form per step without
+/// effects, predict_trajectory (which sees each sample's duration) with them.
+Track propagate(const EncoderLog& log, const PredictModel& m) {
   const std::size_t n = log.t_s.size();
   std::vector<ArcSegment> pieces;
   std::vector<double> durations;  // from the log's t column: speed- and time-dependent effects
@@ -87,75 +111,106 @@ int run_predict(const PredictOptions& opt) {
     pieces.push_back({log.left_m[i] - log.left_m[i - 1], log.right_m[i] - log.right_m[i - 1]});
     durations.push_back(log.t_s[i] - log.t_s[i - 1]);
   }
-  std::vector<Vector3> pose(n, Vector3::Zero()), mean(n, Vector3::Zero());
-  std::vector<Matrix3> cov(n, Matrix3::Zero());
-  if (effects.empty()) {
-    OdometryCovariance odo(robot.wheelbase_m, robot.noise);
+  Track track{std::vector<Vector3>(n, Vector3::Zero()), std::vector<Vector3>(n, Vector3::Zero()),
+              std::vector<Matrix3>(n, Matrix3::Zero())};
+  if (m.effects.empty()) {
+    OdometryCovariance odo(m.robot.wheelbase_m, m.robot.noise);
     for (std::size_t i = 1; i < n; ++i) {
       const OdometryStep& s = odo.step(pieces[i - 1]);
-      pose[i] = s.pose_world;
-      cov[i] = s.P_world;
+      track.pose[i] = s.pose_world;
+      track.cov[i] = s.P_world;
     }
-  } else {
-    const std::vector<Prediction> p = predict_trajectory(pieces, durations, robot, effects);
-    for (std::size_t i = 0; i < n; ++i) {
-      pose[i] = p[i].odometry_end_pose;
-      cov[i] = p[i].cov;
-      mean[i] = p[i].mean;
-    }
+    return track;
   }
-  std::vector<std::size_t> rows;
-  for (std::size_t i = 0; i < n; i += static_cast<std::size_t>(opt.every)) rows.push_back(i);
-  if (rows.back() != n - 1) rows.push_back(n - 1);
+  const std::vector<Prediction> p = predict_trajectory(pieces, durations, m.robot, m.effects);
+  for (std::size_t i = 0; i < n; ++i) {
+    track.pose[i] = p[i].odometry_end_pose;
+    track.cov[i] = p[i].cov;
+    track.mean[i] = p[i].mean;
+  }
+  return track;
+}
 
-  if (!opt.csv.empty()) {
-    std::string text = "t,x,y,theta,cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta";
-    if (!effects.empty()) text += ",mean_x,mean_y,mean_theta";
-    if (opt.ros) for (int k = 0; k < 36; ++k) text += ",pose_covariance_" + std::to_string(k);
+/// The samples written: every `every`-th from the first, and always the last.
+std::vector<std::size_t> written_rows(std::size_t n, std::int64_t every) {
+  std::vector<std::size_t> rows;
+  for (std::size_t i = 0; i < n; i += static_cast<std::size_t>(every)) rows.push_back(i);
+  if (rows.back() != n - 1) rows.push_back(n - 1);
+  return rows;
+}
+
+/// The CSV text: t, pose, the covariance's upper triangle, the mean error with effects and the
+/// ROS 6x6 covariance with --ros; every number at full precision.
+std::string predict_csv(const PredictOptions& opt, const EncoderLog& log, const Track& track,
+                        const std::vector<std::size_t>& rows, bool with_mean) {
+  std::string text = "t,x,y,theta,cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta";
+  if (with_mean) text += ",mean_x,mean_y,mean_theta";
+  if (opt.ros) for (int k = 0; k < 36; ++k) text += ",pose_covariance_" + std::to_string(k);
+  text += "\n";
+  auto g = [](double v) { return format_number(v, "%.17g"); };
+  for (std::size_t i : rows) {
+    const Vector3& pose = track.pose[i];
+    const Matrix3& P = track.cov[i];
+    text += g(log.t_s[i]) + "," + g(pose.x()) + "," + g(pose.y()) + "," + g(pose.z()) + "," +
+            g(P(0, 0)) + "," + g(P(0, 1)) + "," + g(P(0, 2)) + "," + g(P(1, 1)) + "," + g(P(1, 2)) +
+            "," + g(P(2, 2));
+    if (with_mean) text += "," + g(track.mean[i].x()) + "," + g(track.mean[i].y()) + "," + g(track.mean[i].z());
+    if (opt.ros) for (double c : ros_covariance(P, opt.ros_unused_variance)) text += "," + g(c);
     text += "\n";
-    auto g = [](double v) { return format_number(v, "%.17g"); };
-    for (std::size_t i : rows) {
-      const Matrix3& P = cov[i];
-      text += g(log.t_s[i]) + "," + g(pose[i].x()) + "," + g(pose[i].y()) + "," + g(pose[i].z()) + "," +
-              g(P(0, 0)) + "," + g(P(0, 1)) + "," + g(P(0, 2)) + "," + g(P(1, 1)) + "," + g(P(1, 2)) +
-              "," + g(P(2, 2));
-      if (!effects.empty()) text += "," + g(mean[i].x()) + "," + g(mean[i].y()) + "," + g(mean[i].z());
-      if (opt.ros) for (double c : ros_covariance(P, opt.ros_unused_variance)) text += "," + g(c);
-      text += "\n";
-    }
-    write_file_atomic(opt.csv, text);
   }
-  if (!opt.json.empty()) {
-    json samples = json::array();
-    for (std::size_t i : rows) {
-      json s = {{"t", log.t_s[i]}, {"pose", to_json(pose[i])}, {"cov", to_json(cov[i])}};
-      if (!effects.empty()) s["mean"] = to_json(mean[i]);
-      if (opt.ros) s["pose_covariance"] = ros_covariance(cov[i], opt.ros_unused_variance);
-      samples.push_back(s);
-    }
-    json eff = json::array();
-    for (const EffectSpec& e : effects) eff.push_back(effect_yaml(e));
-    write_json_atomic(opt.json, {{"log", opt.log},
-                                 {"robot", {{"wheelbase", robot.wheelbase_m},
-                                            {"k_left", robot.noise.k_left},
-                                            {"k_right", robot.noise.k_right}}},
-                                 {"effects", eff},
-                                 {"samples", samples}});
+  return text;
+}
+
+/// The JSON document (docs/json.md, "predict"): the log, the model and the written samples.
+json predict_json(const PredictOptions& opt, const EncoderLog& log, const PredictModel& m,
+                  const Track& track, const std::vector<std::size_t>& rows) {
+  json samples = json::array();
+  for (std::size_t i : rows) {
+    json s = {{"t", log.t_s[i]}, {"pose", to_json(track.pose[i])}, {"cov", to_json(track.cov[i])}};
+    if (!m.effects.empty()) s["mean"] = to_json(track.mean[i]);
+    if (opt.ros) s["pose_covariance"] = ros_covariance(track.cov[i], opt.ros_unused_variance);
+    samples.push_back(s);
   }
-  const Vector3& end = pose.back();
-  const ErrorEllipse e = error_ellipse(cov.back());
+  json eff = json::array();
+  for (const EffectSpec& e : m.effects) eff.push_back(effect_yaml(e));
+  return {{"log", opt.log},
+          {"robot", {{"wheelbase", m.robot.wheelbase_m},
+                     {"k_left", m.robot.noise.k_left},
+                     {"k_right", m.robot.noise.k_right}}},
+          {"effects", eff},
+          {"samples", samples}};
+}
+
+/// The report on stdout: the log and the model, the end pose, its covariance and 1-sigma
+/// ellipse, and where the rows went.
+std::string predict_report(const PredictOptions& opt, const EncoderLog& log, const PredictModel& m,
+                           const Track& track, std::size_t rows) {
+  const Vector3& end = track.pose.back();
+  const ErrorEllipse e = error_ellipse(track.cov.back());
   std::ostringstream out;
-  out << "odomcov predict: " << opt.log << " (" << n << " samples, " << fixed(log.t_s.back() - log.t_s.front(), 3)
-      << " s), robot from " << source << ": B = " << robot.wheelbase_m << " m, kL = " << robot.noise.k_left
-      << ", kR = " << robot.noise.k_right << " m^(1/2)" << (effects.empty() ? "" : ", with the model's effects")
+  out << "odomcov predict: " << opt.log << " (" << log.t_s.size() << " samples, "
+      << fixed(log.t_s.back() - log.t_s.front(), 3) << " s), robot from " << m.source
+      << ": B = " << m.robot.wheelbase_m << " m, kL = " << m.robot.noise.k_left
+      << ", kR = " << m.robot.noise.k_right << " m^(1/2)" << (m.effects.empty() ? "" : ", with the model's effects")
       << "\nend pose x = " << fixed(end.x(), 4) << " m, y = " << fixed(end.y(), 4)
       << " m, theta = " << fixed(wrap_angle(end.z()) * 180.0 / M_PI, 2) << " deg\n"
-      << "end covariance (world frame, x, y, theta):\n" << matrix_rows(cov.back(), "    ")
+      << "end covariance (world frame, x, y, theta):\n" << matrix_rows(track.cov.back(), "    ")
       << "1-sigma ellipse: a = " << sci(e.semi_major_m, 4) << " m, b = " << sci(e.semi_minor_m, 4)
       << " m, angle = " << fixed(e.angle_rad * 180.0 / M_PI, 2) << " deg\n"
-      << rows.size() << " rows written" << (opt.csv.empty() ? "" : " to " + opt.csv)
+      << rows << " rows written" << (opt.csv.empty() ? "" : " to " + opt.csv)
       << (opt.json.empty() ? "" : (opt.csv.empty() ? " to " : " and ") + opt.json) << "\n";
-  std::cout << out.str();
+  return out.str();
+}
+
+int run_predict(const PredictOptions& opt) {
+  check_options(opt);
+  const PredictModel model = select_model(opt);
+  const EncoderLog log = load_encoder_log(opt.log, opt.left_scale, opt.right_scale);
+  const Track track = propagate(log, model);
+  const std::vector<std::size_t> rows = written_rows(log.t_s.size(), opt.every);
+  if (!opt.csv.empty()) write_file_atomic(opt.csv, predict_csv(opt, log, track, rows, !model.effects.empty()));
+  if (!opt.json.empty()) write_json_atomic(opt.json, predict_json(opt, log, model, track, rows));
+  std::cout << predict_report(opt, log, model, track, rows.size());
   return kExitOk;
 }
 

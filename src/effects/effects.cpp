@@ -38,6 +38,21 @@ const EffectInfo* info_of(const EffectSpec& spec) {
   return spec.custom ? &spec.custom->info : find_effect(spec.name);
 }
 
+namespace {
+
+/// A parameter's value checked against its range: "" when within, else the error.
+std::string check_value(const EffectParameterInfo& p, double v) {
+  if (!std::isfinite(v)) return p.name + " must be finite";
+  const bool below = p.open_lower ? !(v > p.lower) : !(v >= p.lower);
+  const bool above = p.open_upper ? !(v < p.upper) : !(v <= p.upper);
+  if (!below && !above) return "";
+  std::string range = (p.open_lower ? "(" : "[") + format_number(p.lower) + ", ";
+  range += p.upper >= 1e300 ? std::string("inf)") : format_number(p.upper) + (p.open_upper ? ")" : "]");
+  return p.name + " must be in " + range + ", got " + format_number(v);
+}
+
+}  // namespace
+
 std::string check_effect(const EffectSpec& spec) {
   if (spec.custom && spec.custom->name != spec.name) return "custom effect named '" + spec.custom->name + "'";
   if (spec.custom && find_effect(spec.name)) return "custom effect '" + spec.name + "' has a catalogue effect's name";
@@ -47,16 +62,7 @@ std::string check_effect(const EffectSpec& spec) {
     return spec.name + " takes " + std::to_string(info->parameters.size()) + " parameters";
   }
   for (std::size_t i = 0; i < spec.values.size(); ++i) {
-    const EffectParameterInfo& p = info->parameters[i];
-    const double v = spec.values[i];
-    if (!std::isfinite(v)) return p.name + " must be finite";
-    const bool below = p.open_lower ? !(v > p.lower) : !(v >= p.lower);
-    const bool above = p.open_upper ? !(v < p.upper) : !(v <= p.upper);
-    if (below || above) {
-      std::string range = (p.open_lower ? "(" : "[") + format_number(p.lower) + ", ";
-      range += p.upper >= 1e300 ? std::string("inf)") : format_number(p.upper) + (p.open_upper ? ")" : "]");
-      return p.name + " must be in " + range + ", got " + format_number(v);
-    }
+    if (std::string e = check_value(info->parameters[i], spec.values[i]); !e.empty()) return e;
   }
   return "";
 }

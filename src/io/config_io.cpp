@@ -140,6 +140,72 @@ void check_group_target_at(const Where& where, const YAML::Node& node, const Eff
   }
 }
 
+/// A custom effect as an item of an effect list (`- custom: {...}`): its name must not be
+/// listed yet.
+EffectSpec parse_custom_item(const Where& effect_where, const YAML::Node& item, const EffectList& list) {
+  EffectSpec spec = parse_custom(effect_where, item.begin()->second);
+  if (find_spec(list, spec.name)) {
+    yaml::fail(effect_where.child("name"), item.begin()->second["name"],
+               "name clash: effect " + quote(spec.name) + " listed twice");
+  }
+  return spec;
+}
+
+/// The catalogue's entry for an item's effect name; bad input naming the known effects else.
+const EffectInfo& catalogue_entry(const Where& effect_where, const YAML::Node& item, const std::string& name) {
+  const EffectInfo* info = find_effect(name);
+  if (!info) {
+    std::string known;
+    for (const EffectInfo& e : effect_catalogue()) known += (known.empty() ? "" : ", ") + e.name;
+    yaml::fail(effect_where, item.begin()->first, "unknown effect (known: " + known + ", custom)");
+  }
+  return *info;
+}
+
+/// group_variation's `parameter: <effect>.<parameter>`, the parameter it varies (required;
+/// check_group_target_at checks it against the list).
+std::string parse_group_target(const Where& effect_where, const YAML::Node& params) {
+  return yaml::to_string(effect_where.child("parameter"), yaml::require(effect_where, params, "parameter"));
+}
+
+/// Every key of a catalogue effect's map must name one of its parameters (or be
+/// group_variation's `parameter`).
+void check_parameter_names(const Where& effect_where, const YAML::Node& params, const EffectInfo& info) {
+  for (const auto& entry : params) {
+    const std::string p = entry.first.Scalar();
+    bool known = info.grouped && p == "parameter";
+    for (const EffectParameterInfo& info_p : info.parameters) known = known || info_p.name == p;
+    if (!known) yaml::fail(effect_where.child(p), entry.first, "unknown parameter");
+  }
+}
+
+/// A failed check_effect as bad input: at the offending parameter's line when the message
+/// starts with its name, else at the effect's map.
+[[noreturn]] void fail_effect_check(const Where& effect_where, const YAML::Node& params,
+                                    const EffectInfo& info, const std::string& error) {
+  for (const EffectParameterInfo& p : info.parameters) {
+    if (error.rfind(p.name + " ", 0) == 0) {
+      yaml::fail(effect_where.child(p.name), params[p.name], error.substr(p.name.size() + 1));
+    }
+  }
+  yaml::fail(effect_where, params, error);
+}
+
+/// A catalogue effect (`- name: {parameter: value, ...}`, group_variation with its target):
+/// every parameter given, none unknown, each within its range (check_effect).
+EffectSpec parse_catalogue_effect(const Where& effect_where, const YAML::Node& params,
+                                  const EffectInfo& info, const std::string& name) {
+  if (!params.IsMap()) yaml::fail(effect_where, params, "expected a map of parameters");
+  EffectSpec spec{name, {}, {}};
+  if (info.grouped) spec.target = parse_group_target(effect_where, params);
+  check_parameter_names(effect_where, params, info);
+  for (const EffectParameterInfo& p : info.parameters) {
+    spec.values.push_back(yaml::require_number(effect_where, params, p.name.c_str()));
+  }
+  if (const std::string error = check_effect(spec); !error.empty()) fail_effect_check(effect_where, params, info, error);
+  return spec;
+}
+
 }  // namespace
 
 EffectList parse_effects(const YAML::Node& node, const std::string& file, const std::string& key) {
@@ -155,42 +221,11 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     const std::string name = item.begin()->first.Scalar();
     const Where effect_where = item_where.child(name);
     if (name == "custom") {
-      EffectSpec spec = parse_custom(effect_where, item.begin()->second);
-      if (find_spec(list, spec.name)) yaml::fail(effect_where.child("name"), item.begin()->second["name"], "name clash: effect " + quote(spec.name) + " listed twice");
-      list.push_back(std::move(spec));
+      list.push_back(parse_custom_item(effect_where, item, list));
       continue;
     }
-    const EffectInfo* info = find_effect(name);
-    if (!info) {
-      std::string known;
-      for (const EffectInfo& e : effect_catalogue()) known += (known.empty() ? "" : ", ") + e.name;
-      yaml::fail(effect_where, item.begin()->first, "unknown effect (known: " + known + ", custom)");
-    }
-    const YAML::Node params = item.begin()->second;
-    if (!params.IsMap()) yaml::fail(effect_where, params, "expected a map of parameters");
-    EffectSpec spec{name, {}, {}};
-    if (info->grouped) {  // group_variation: {parameter: <effect>.<parameter>, sd: ...}
-      spec.target = yaml::to_string(effect_where.child("parameter"),
-                                    yaml::require(effect_where, params, "parameter"));
-    }
-    for (const auto& entry : params) {
-      const std::string p = entry.first.Scalar();
-      bool known = info->grouped && p == "parameter";
-      for (const EffectParameterInfo& info_p : info->parameters) known = known || info_p.name == p;
-      if (!known) yaml::fail(effect_where.child(p), entry.first, "unknown parameter");
-    }
-    for (const EffectParameterInfo& p : info->parameters) {
-      spec.values.push_back(yaml::require_number(effect_where, params, p.name.c_str()));
-    }
-    if (const std::string error = check_effect(spec); !error.empty()) {
-      // Name the offending parameter's line when the message starts with it.
-      for (const EffectParameterInfo& p : info->parameters) {
-        if (error.rfind(p.name + " ", 0) == 0) {
-          yaml::fail(effect_where.child(p.name), params[p.name], error.substr(p.name.size() + 1));
-        }
-      }
-      yaml::fail(effect_where, params, error);
-    }
+    const EffectInfo& info = catalogue_entry(effect_where, item, name);
+    EffectSpec spec = parse_catalogue_effect(effect_where, item.begin()->second, info, name);
     if (find_spec(list, name)) yaml::fail(effect_where, item, "effect listed twice");
     list.push_back(std::move(spec));
   }

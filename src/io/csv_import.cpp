@@ -76,56 +76,87 @@ Vector3 in_start_frame(const Vector3& pose, const Vector3& start) {
 /// significant digits to stay distinct, and the written suite must always load back.
 std::string number(double v) { return format_number(v, "%.17g"); }
 
-ConvertedRun convert(const std::string& file, const CsvImportOptions& o) {
-  const csv::Table table = csv::read(file, {"t", "left", "right", "x", "y", "theta"});
+/// A log's rows, read and checked, and the wheel readings and reference poses among them.
+struct InputLog {
   std::vector<InputRow> rows;
-  std::vector<WheelSample> wheels;
-  std::vector<ReferenceSample> refs;
-  for (const csv::Row& row : table.rows) {
-    InputRow in;
-    in.t = row.number(0);
-    if (!rows.empty() && !(in.t > rows.back().t)) {
-      csv::fail(file, row.line, "t", "time must increase strictly");
-    }
-    const bool has_left = !row.empty(1), has_right = !row.empty(2);
-    if (has_left != has_right) csv::fail(file, row.line, "left,right", "give both wheels or neither");
-    const bool has_x = !row.empty(3), has_y = !row.empty(4), has_theta = !row.empty(5);
-    if (!(has_x == has_y && has_y == has_theta)) {
-      csv::fail(file, row.line, "x,y,theta", "a reference pose needs all of x, y and theta");
-    }
-    if (!has_left && !has_x) csv::fail(file, row.line, "left,right,x,y,theta", "the row is empty");
-    if (has_left) {
-      in.wheels = true;
-      in.left = o.left_scale * row.number(1);
-      in.right = o.right_scale * row.number(2);
-      wheels.push_back({in.t, in.left, in.right});
-    }
-    if (has_x) {
-      in.reference = true;
-      double theta = row.number(5);
-      if (!refs.empty()) theta = refs.back().pose.z() + wrap_angle(theta - refs.back().pose.z());
-      in.pose = {row.number(3), row.number(4), theta};
-      refs.push_back({in.t, in.pose, row.line});
-    }
-    rows.push_back(in);
+  std::vector<WheelSample> wheels;     // scaled to metres
+  std::vector<ReferenceSample> refs;   // theta unwrapped
+  int last_line = 0;                   // of the file's last row
+};
+
+/// Reads one row into `log`: time strictly increasing, both wheels or neither, the reference
+/// pose complete or absent, and not both absent.
+void read_row(const std::string& file, const csv::Row& row, const CsvImportOptions& o, InputLog& log) {
+  InputRow in;
+  in.t = row.number(0);
+  if (!log.rows.empty() && !(in.t > log.rows.back().t)) {
+    csv::fail(file, row.line, "t", "time must increase strictly");
   }
-  const int last_line = table.rows.back().line;
-  if (wheels.size() < 2) csv::fail(file, last_line, "left,right", "a run needs two wheel readings or more");
-  if (refs.empty()) csv::fail(file, last_line, "x,y,theta", "the log has no reference pose");
-  if (refs.front().t >= wheels.back().t) {
-    csv::fail(file, refs.front().line, "x,y,theta",
+  const bool has_left = !row.empty(1), has_right = !row.empty(2);
+  if (has_left != has_right) csv::fail(file, row.line, "left,right", "give both wheels or neither");
+  const bool has_x = !row.empty(3), has_y = !row.empty(4), has_theta = !row.empty(5);
+  if (!(has_x == has_y && has_y == has_theta)) {
+    csv::fail(file, row.line, "x,y,theta", "a reference pose needs all of x, y and theta");
+  }
+  if (!has_left && !has_x) csv::fail(file, row.line, "left,right,x,y,theta", "the row is empty");
+  if (has_left) {
+    in.wheels = true;
+    in.left = o.left_scale * row.number(1);
+    in.right = o.right_scale * row.number(2);
+    log.wheels.push_back({in.t, in.left, in.right});
+  }
+  if (has_x) {
+    in.reference = true;
+    double theta = row.number(5);
+    if (!log.refs.empty()) theta = log.refs.back().pose.z() + wrap_angle(theta - log.refs.back().pose.z());
+    in.pose = {row.number(3), row.number(4), theta};
+    log.refs.push_back({in.t, in.pose, row.line});
+  }
+  log.rows.push_back(in);
+}
+
+/// Reads and checks every row of a log file (columns t,left,right,x,y,theta).
+InputLog read_log(const std::string& file, const CsvImportOptions& o) {
+  const csv::Table table = csv::read(file, {"t", "left", "right", "x", "y", "theta"});
+  InputLog log;
+  for (const csv::Row& row : table.rows) read_row(file, row, o, log);
+  log.last_line = table.rows.back().line;
+  return log;
+}
+
+/// The run's span [t_start, t_end] [s]: from the first time both the wheels and the reference
+/// are known to the last reference pose within the wheels' time span. Bad input when the log
+/// has too few wheel readings, no reference, or no overlap.
+std::pair<double, double> run_span(const std::string& file, const InputLog& log) {
+  if (log.wheels.size() < 2) csv::fail(file, log.last_line, "left,right", "a run needs two wheel readings or more");
+  if (log.refs.empty()) csv::fail(file, log.last_line, "x,y,theta", "the log has no reference pose");
+  if (log.refs.front().t >= log.wheels.back().t) {
+    csv::fail(file, log.refs.front().line, "x,y,theta",
               "the reference starts at or after the last wheel reading; nothing overlaps");
   }
-  const double t_start = std::max(wheels.front().t, refs.front().t);
+  const double t_start = std::max(log.wheels.front().t, log.refs.front().t);
   double t_end = t_start;
-  for (const ReferenceSample& r : refs) {
-    if (r.t > t_start && r.t <= wheels.back().t) t_end = r.t;
+  for (const ReferenceSample& r : log.refs) {
+    if (r.t > t_start && r.t <= log.wheels.back().t) t_end = r.t;
   }
   if (!(t_end > t_start)) {
-    csv::fail(file, last_line, "x,y,theta", "no reference pose after the start of the run");
+    csv::fail(file, log.last_line, "x,y,theta", "no reference pose after the start of the run");
   }
-  const WheelSample w0 = wheels_at(wheels, t_start);
-  const Vector3 start = reference_at(refs, t_start);
+  return {t_start, t_end};
+}
+
+/// The reference's travel from pose a to pose b [m]: the distance, or the heading change as
+/// arc length at half the wheelbase `half_b` [m] when that is longer (turns on the spot).
+double reference_step(const Vector3& a, const Vector3& b, double half_b) {
+  return std::max(std::hypot(b.x() - a.x(), b.y() - a.y()), half_b * std::abs(b.z() - a.z()));
+}
+
+/// The suite's log of the run's span: the wheels' travel since the start (interpolated where a
+/// row has none), the reference in the start frame; with the encoder and reference travel and
+/// the encoder heading change.
+ConvertedRun write_run(const InputLog& log, double t_start, double t_end, const CsvImportOptions& o) {
+  const WheelSample w0 = wheels_at(log.wheels, t_start);
+  const Vector3 start = reference_at(log.refs, t_start);
 
   ConvertedRun out;
   out.log = "t,left,right,x,y,theta\n" + number(t_start) + ",0,0,0,0,0\n";
@@ -133,12 +164,9 @@ ConvertedRun convert(const std::string& file, const CsvImportOptions& o) {
   Vector3 counted = Vector3::Zero();  // last reference pose counted into the travel
   Vector3 last_ref = Vector3::Zero();
   const double half_b = 0.5 * o.wheelbase_m;
-  auto ref_step = [half_b](const Vector3& a, const Vector3& b) {
-    return std::max(std::hypot(b.x() - a.x(), b.y() - a.y()), half_b * std::abs(b.z() - a.z()));
-  };
-  for (const InputRow& in : rows) {
+  for (const InputRow& in : log.rows) {
     if (!(in.t > t_start) || in.t > t_end) continue;
-    const WheelSample w = in.wheels ? WheelSample{in.t, in.left, in.right} : wheels_at(wheels, in.t);
+    const WheelSample w = in.wheels ? WheelSample{in.t, in.left, in.right} : wheels_at(log.wheels, in.t);
     const double left = w.left - w0.left, right = w.right - w0.right;
     out.encoder_travel_m += 0.5 * (std::abs(left - left_prev) + std::abs(right - right_prev));
     left_prev = left;
@@ -147,8 +175,8 @@ ConvertedRun convert(const std::string& file, const CsvImportOptions& o) {
     if (in.reference) {
       const Vector3 p = in_start_frame(in.pose, start);
       out.log += "," + number(p.x()) + "," + number(p.y()) + "," + number(p.z());
-      if (ref_step(counted, p) >= kReferenceStepM) {
-        out.reference_travel_m += ref_step(counted, p);
+      if (reference_step(counted, p, half_b) >= kReferenceStepM) {
+        out.reference_travel_m += reference_step(counted, p, half_b);
         counted = p;
       }
       last_ref = p;
@@ -157,9 +185,14 @@ ConvertedRun convert(const std::string& file, const CsvImportOptions& o) {
     }
     out.log += "\n";
   }
-  out.reference_travel_m += ref_step(counted, last_ref);  // the stretch after the last full step
+  out.reference_travel_m += reference_step(counted, last_ref, half_b);  // the stretch after the last full step
   out.turn_rad = (right_prev - left_prev) / o.wheelbase_m;
+  return out;
+}
 
+/// The wheel unit check: encoder and reference travel may differ by at most kMaxTravelRatio
+/// once the run is long enough to tell.
+void check_travel(const std::string& file, const ConvertedRun& out) {
   const double longer = std::max(out.encoder_travel_m, out.reference_travel_m);
   const double shorter = std::min(out.encoder_travel_m, out.reference_travel_m);
   if (longer >= kMinCheckedTravelM && !(longer <= kMaxTravelRatio * shorter)) {
@@ -170,7 +203,36 @@ ConvertedRun convert(const std::string& file, const CsvImportOptions& o) {
                          ", more than " + format_number(kMaxTravelRatio) +
                          "): check the wheel unit and --left-scale/--right-scale");
   }
+}
+
+/// One log converted: read and checked, cut to the span both sources cover, re-expressed from
+/// the run's start, and its travel checked.
+ConvertedRun convert(const std::string& file, const CsvImportOptions& o) {
+  const InputLog log = read_log(file, o);
+  const auto [t_start, t_end] = run_span(file, log);
+  ConvertedRun out = write_run(log, t_start, t_end, o);
+  check_travel(file, out);
   return out;
+}
+
+/// The logs an input names, and in `folder` the folder that names their experiment: every
+/// *.csv of a folder (sorted; none is bad input), or the file itself.
+std::vector<fs::path> input_logs(const std::string& input, const fs::path& path, fs::path& folder) {
+  std::vector<fs::path> files;
+  if (fs::is_directory(path)) {
+    folder = path.has_filename() ? path : path.parent_path();
+    for (const auto& entry : fs::directory_iterator(folder)) {
+      if (entry.is_regular_file() && entry.path().extension() == ".csv") files.push_back(entry.path());
+    }
+    if (files.empty()) throw InputError(input, 0, "", "no *.csv logs in this folder");
+    std::sort(files.begin(), files.end());
+  } else if (fs::is_regular_file(path)) {
+    folder = path.parent_path();
+    files.push_back(path);
+  } else {
+    throw InputError(input, 0, "", "cannot open file");
+  }
+  return files;
 }
 
 /// The runs of the inputs, grouped into experiments by folder name.
@@ -179,21 +241,8 @@ std::map<std::string, std::vector<fs::path>> group_runs(const std::vector<std::s
   std::map<std::string, fs::path> folder_of;  // experiment name -> the folder it came from
   for (const std::string& input : inputs) {
     const fs::path path = fs::absolute(fs::path(input)).lexically_normal();
-    std::vector<fs::path> files;
     fs::path folder;
-    if (fs::is_directory(path)) {
-      folder = path.has_filename() ? path : path.parent_path();
-      for (const auto& entry : fs::directory_iterator(folder)) {
-        if (entry.is_regular_file() && entry.path().extension() == ".csv") files.push_back(entry.path());
-      }
-      if (files.empty()) throw InputError(input, 0, "", "no *.csv logs in this folder");
-      std::sort(files.begin(), files.end());
-    } else if (fs::is_regular_file(path)) {
-      folder = path.parent_path();
-      files.push_back(path);
-    } else {
-      throw InputError(input, 0, "", "cannot open file");
-    }
+    const std::vector<fs::path> files = input_logs(input, path, folder);
     const std::string name = folder.filename().string();
     if (name.empty()) throw InputError(input, 0, "", "a log must sit in a folder that names its experiment");
     const auto [it, inserted] = folder_of.emplace(name, folder);

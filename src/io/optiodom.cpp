@@ -81,20 +81,33 @@ std::string recording_day(const std::string& name) {
   return text;
 }
 
-}  // namespace
-
-std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
-                                          std::vector<ImportSummary>* summary) {
-  if (options.sessions.empty()) throw InputError("", 0, "", "no session directories given");
-  // Metadata first: all sessions must agree on the nominal robot unless one is given.
+/// Every session's metadata, read before any run file: all must exist and be directories.
+std::vector<Metadata> read_all_metadata(const std::vector<std::string>& sessions) {
   std::vector<Metadata> metas;
-  for (const std::string& s : options.sessions) {
+  for (const std::string& s : sessions) {
     const fs::path dir(s);
     if (!fs::is_directory(dir)) throw InputError(s, 0, "", "not a session directory");
     metas.push_back(read_metadata(dir));
   }
-  double wheelbase = metas[0].wheelbase;
-  std::pair<double, double> diameters{metas[0].diameters[1], metas[0].diameters[0]};  // (L, R)
+  return metas;
+}
+
+/// A session's wheel diameters as (left, right) [m]: Di gives odoR's wheel first.
+std::pair<double, double> left_right_diameters(const Metadata& m) { return {m.diameters[1], m.diameters[0]}; }
+
+/// The nominal robot of the suite and the ticks-to-metres factors of the encoders.
+struct Nominal {
+  double wheelbase = 0;                      // [m]
+  std::pair<double, double> diameters;       // (left, right) [m]
+  double metres_left = 0, metres_right = 0;  // wheel travel per encoder tick [m]
+};
+
+/// The sessions must agree on the nominal robot (wheelbase, wheel diameters) unless the options
+/// choose it, and always on the gear ratio and encoder resolution. The first disagreeing
+/// session's metadata file is named.
+void check_sessions_agree(const std::vector<Metadata>& metas, const OptiOdomOptions& options) {
+  const double wheelbase = metas[0].wheelbase;
+  const std::pair<double, double> diameters = left_right_diameters(metas[0]);
   for (const Metadata& m : metas) {
     if (!options.wheelbase_m && m.wheelbase != wheelbase) {
       throw InputError(m.file, 0, "Li",
@@ -110,109 +123,194 @@ std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
       throw InputError(m.file, 0, "ngear", "sessions disagree on the gear ratio or encoder resolution");
     }
   }
-  if (options.wheelbase_m) wheelbase = *options.wheelbase_m;
-  if (options.diameters_m) diameters = *options.diameters_m;
-  const double ticks = metas[0].gear * metas[0].resolution;  // encoder counts per wheel turn
-  const double metres_left = M_PI * diameters.first / ticks;
-  const double metres_right = M_PI * diameters.second / ticks;
+}
 
+/// The nominal robot: the options' wheelbase and diameters, else the (agreeing) metadata's;
+/// ticks become metres as pi D / (ngear encRes).
+Nominal nominal_robot(const std::vector<Metadata>& metas, const OptiOdomOptions& options) {
+  check_sessions_agree(metas, options);
+  Nominal robot;
+  robot.wheelbase = options.wheelbase_m ? *options.wheelbase_m : metas[0].wheelbase;
+  robot.diameters = options.diameters_m ? *options.diameters_m : left_right_diameters(metas[0]);
+  const double ticks = metas[0].gear * metas[0].resolution;  // encoder counts per wheel turn
+  robot.metres_left = M_PI * robot.diameters.first / ticks;
+  robot.metres_right = M_PI * robot.diameters.second / ticks;
+  return robot;
+}
+
+/// A session's run files (SESSION_run-NN.csv), sorted; none is bad input.
+std::vector<fs::path> run_files_of(const std::string& s, const fs::path& dir, const std::string& session) {
+  std::vector<fs::path> run_files;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind(session + "_run-", 0) == 0 && entry.path().extension() == ".csv") {
+      run_files.push_back(entry.path());
+    }
+  }
+  std::sort(run_files.begin(), run_files.end());
+  if (run_files.empty()) throw InputError(s, 0, "", "no run files (" + session + "_run-NN.csv)");
+  return run_files;
+}
+
+/// One row of a run file: time [s], the cumulative wheel travel since the first row [m], and
+/// the OptiTrack pose (world frame, x and y [m], theta [rad]).
+struct RunRow {
+  int line = 0;
+  double t = 0, left = 0, right = 0;
+  Vector3 reference = Vector3::Zero();
+};
+
+/// A run file read and checked row by row, with what the importer reports of it.
+struct Run {
+  std::vector<RunRow> rows;
+  std::vector<ArcSegment> pieces;  // per row [m], for the suite loader's own limits
+  double turned = 0;  // encoder heading change [rad]
+  double travel = 0;  // encoder centre travel, sum |dL + dR|/2 [m]
+};
+
+/// Reads a run file (columns: time, x_gt, y_gt, th_gt, odoR, odoL, the ticks in the cycle
+/// ending at the row): every value parsed, time strictly increasing, and the cumulative
+/// travel within the loader's limits (limits.hpp), so the written suite always loads.
+Run read_run(const fs::path& run_file, const Nominal& robot) {
+  const csv::Table table = csv::read_headerless(run_file.string(), 6);
+  Run run;
+  double left = 0, right = 0, t_prev = -HUGE_VAL;
+  for (const csv::Row& row : table.rows) {
+    const double t = row.number(0);
+    const Vector3 reference(row.number(1), row.number(2), row.number(3));  // every row checked
+    if (!(t > t_prev)) csv::fail(run_file.string(), row.line, "time", "time must increase strictly");
+    t_prev = t;
+    const double dl = row.number(5) * robot.metres_left, dr = row.number(4) * robot.metres_right;
+    left += dl;
+    right += dr;
+    run.pieces.push_back({dl, dr});
+    for (const auto& [value, column] : {std::pair{left, "left"}, std::pair{right, "right"}}) {
+      if (const std::string e = limits::check_length(value); !e.empty()) csv::fail(run_file.string(), row.line, column, e);
+    }
+    run.turned += (dr - dl) / robot.wheelbase;
+    run.travel += std::abs(0.5 * (dl + dr));
+    run.rows.push_back({row.line, t, left, right, reference});
+  }
+  return run;
+}
+
+/// What must hold of a whole run: its end pose (the only one written) within the loader's
+/// limits, two rows or more, and its pieces within the loader's limits at the wheelbase.
+void check_run(const fs::path& run_file, const Run& run, double wheelbase) {
+  if (!run.rows.empty()) {
+    const RunRow& last = run.rows.back();
+    const char* const columns[3] = {"x", "y", "theta"};
+    for (int k = 0; k < 3; ++k) {
+      if (const std::string e = limits::check_length(last.reference[k]); !e.empty()) {
+        csv::fail(run_file.string(), last.line, columns[k], e);
+      }
+    }
+  }
+  if (run.rows.size() < 2) throw InputError(run_file.string(), 0, "", "a run needs two rows or more");
+  // The written suite must load: a run beyond the loader's limits is refused here.
+  if (const std::string e = limits::check_pieces(run.pieces, wheelbase); !e.empty()) {
+    throw InputError(run_file.string(), 0, "", e);
+  }
+}
+
+/// The suite's log of a run: t and the cumulative left and right travel per row, the
+/// OptiTrack end pose in the last row only.
+std::string run_log(const Run& run) {
+  std::string log = "t,left,right,x,y,theta\n";
+  for (std::size_t i = 0; i < run.rows.size(); ++i) {
+    const RunRow& row = run.rows[i];
+    // %.17g: Unix timestamps (1.7e9 s at 20 Hz) need more than ten digits to stay distinct.
+    log += format_number(row.t, "%.17g") + "," + format_number(row.left, "%.17g") + "," +
+           format_number(row.right, "%.17g");
+    if (i + 1 == run.rows.size()) {
+      log += "," + format_number(row.reference.x()) + "," + format_number(row.reference.y()) + "," +
+             format_number(row.reference.z());
+    } else {
+      log += ",,,";
+    }
+    log += "\n";
+  }
+  return log;
+}
+
+/// The experiment of a run: path type and session, and for the calibration paths the turning
+/// direction from the sign of the encoders' total heading change `turned` [rad].
+std::string experiment_name(const std::string& type, const std::string& session, double turned) {
+  std::string direction;
+  if (type == "square" || type == "circular" || type == "ivanjko") {
+    direction = std::abs(turned) < kStraightBelowRad ? "-straight" : turned < 0 ? "-cw" : "-ccw";
+  }
+  return type + "-" + session + direction;
+}
+
+/// The import so far: the run logs, and per experiment its logs, group and summary.
+struct Imported {
   std::vector<ImportedFile> files;
   std::map<std::string, std::vector<std::string>> experiments;  // name -> log paths
   std::map<std::string, std::string> groups;                     // name -> session or day
   std::map<std::string, ImportSummary> sums;
-  for (const std::string& s : options.sessions) {
-    const fs::path dir = fs::path(s).lexically_normal();
-    const std::string session = dir.filename().string();
-    const std::string type = dir.parent_path().filename().string();
-    std::vector<fs::path> run_files;
-    for (const auto& entry : fs::directory_iterator(dir)) {
-      const std::string name = entry.path().filename().string();
-      if (name.rfind(session + "_run-", 0) == 0 && entry.path().extension() == ".csv") {
-        run_files.push_back(entry.path());
-      }
-    }
-    std::sort(run_files.begin(), run_files.end());
-    if (run_files.empty()) throw InputError(s, 0, "", "no run files (" + session + "_run-NN.csv)");
-    for (const fs::path& run_file : run_files) {
-      // Columns: time, x_gt, y_gt, th_gt, odoR, odoL (ticks in the cycle ending at the row).
-      const csv::Table table = csv::read_headerless(run_file.string(), 6);
-      std::string log = "t,left,right,x,y,theta\n";
-      double left = 0, right = 0, t_prev = -HUGE_VAL, turned = 0, travel = 0;
-      std::vector<ArcSegment> pieces;  // for the suite loader's own limits, checked here first
-      for (std::size_t i = 0; i < table.rows.size(); ++i) {
-        const csv::Row& row = table.rows[i];
-        const double t = row.number(0);
-        const Vector3 reference(row.number(1), row.number(2), row.number(3));  // every row checked
-        if (!(t > t_prev)) csv::fail(run_file.string(), row.line, "time", "time must increase strictly");
-        t_prev = t;
-        const double dl = row.number(5) * metres_left, dr = row.number(4) * metres_right;
-        left += dl;
-        right += dr;
-        pieces.push_back({dl, dr});
-        // The loader's checks of every value written (limits.hpp), so the suite always loads.
-        for (const auto& [value, column] : {std::pair{left, "left"}, std::pair{right, "right"}}) {
-          if (const std::string e = limits::check_length(value); !e.empty()) csv::fail(run_file.string(), row.line, column, e);
-        }
-        turned += (dr - dl) / wheelbase;
-        travel += std::abs(0.5 * (dl + dr));
-        // %.17g: Unix timestamps (1.7e9 s at 20 Hz) need more than ten digits to stay distinct.
-        log += format_number(t, "%.17g") + "," + format_number(left, "%.17g") + "," +
-               format_number(right, "%.17g");
-        if (i + 1 == table.rows.size()) {
-          for (int k = 0; k < 3; ++k) {
-            if (const std::string e = limits::check_length(reference[k]); !e.empty()) {
-              csv::fail(run_file.string(), row.line, k == 0 ? "x" : k == 1 ? "y" : "theta", e);
-            }
-          }
-          log += "," + format_number(reference.x()) + "," + format_number(reference.y()) + "," + format_number(reference.z());
-        } else {
-          log += ",,,";
-        }
-        log += "\n";
-      }
-      if (table.rows.size() < 2) throw InputError(run_file.string(), 0, "", "a run needs two rows or more");
-      // The written suite must load: a run beyond the loader's limits is refused here.
-      if (const std::string e = limits::check_pieces(pieces, wheelbase); !e.empty()) {
-        throw InputError(run_file.string(), 0, "", e);
-      }
-      std::string direction;
-      if (type == "square" || type == "circular" || type == "ivanjko") {
-        direction = std::abs(turned) < kStraightBelowRad ? "-straight" : turned < 0 ? "-cw" : "-ccw";
-      }
-      const std::string experiment = type + "-" + session + direction;
-      const std::string stem = run_file.stem().string();
-      const std::string rel = type + "/" + session + "/" + stem.substr(session.size() + 1) + ".csv";
-      files.push_back({rel, log});
-      experiments[experiment].push_back(rel);
-      groups[experiment] = options.group == OptiOdomGroup::day ? recording_day(session) : session;
-      ImportSummary& sum = sums[experiment];
-      sum.experiment = experiment;
-      sum.runs += 1;
-      sum.mean_travel_m += travel;
-      sum.mean_turn_rad += turned;
-    }
+};
+
+/// Reads, checks and converts every run of a session directory into `out`.
+void import_session(const std::string& s, const Nominal& robot, const OptiOdomOptions& options,
+                    Imported& out) {
+  const fs::path dir = fs::path(s).lexically_normal();
+  const std::string session = dir.filename().string();
+  const std::string type = dir.parent_path().filename().string();
+  for (const fs::path& run_file : run_files_of(s, dir, session)) {
+    const Run run = read_run(run_file, robot);
+    check_run(run_file, run, robot.wheelbase);
+    const std::string experiment = experiment_name(type, session, run.turned);
+    const std::string stem = run_file.stem().string();
+    const std::string rel = type + "/" + session + "/" + stem.substr(session.size() + 1) + ".csv";
+    out.files.push_back({rel, run_log(run)});
+    out.experiments[experiment].push_back(rel);
+    out.groups[experiment] = options.group == OptiOdomGroup::day ? recording_day(session) : session;
+    ImportSummary& sum = out.sums[experiment];
+    sum.experiment = experiment;
+    sum.runs += 1;
+    sum.mean_travel_m += run.travel;
+    sum.mean_turn_rad += run.turned;
   }
+}
+
+/// The suite.yaml text: the nominal robot and one logged experiment per name, with its group.
+std::string suite_text(const Metadata& meta, const Nominal& robot, const OptiOdomOptions& options,
+                       const Imported& imported) {
   SuiteDocument doc;
   doc.comments = {"Imported by `odomcov import optiodom` from the OptiOdom recordings",
                   "(Sousa et al., J Intell Robot Syst 105:39, 2022; MIT licence).",
-                  "Ticks to metres: pi D / (" + format_number(metas[0].gear) + " x " +
-                      format_number(metas[0].resolution) + "), no quadrature factor."};
+                  "Ticks to metres: pi D / (" + format_number(meta.gear) + " x " +
+                      format_number(meta.resolution) + "), no quadrature factor."};
   doc.name = options.name;
-  doc.robot = Robot{wheelbase, {options.k, options.k}};
+  doc.robot = Robot{robot.wheelbase, {options.k, options.k}};
   doc.measurement_noise = options.measurement_noise;
-  for (const auto& [name, logs] : experiments) {
-    doc.experiments.push_back({name, "", "", logs, groups[name]});
+  for (const auto& [name, logs] : imported.experiments) {
+    doc.experiments.push_back({name, "", "", logs, imported.groups.at(name)});
   }
-  const std::string yaml = suite_yaml(doc);
-  files.push_back({"suite.yaml", yaml});
+  return suite_yaml(doc);
+}
+
+}  // namespace
+
+std::vector<ImportedFile> import_optiodom(const OptiOdomOptions& options,
+                                          std::vector<ImportSummary>* summary) {
+  if (options.sessions.empty()) throw InputError("", 0, "", "no session directories given");
+  // Metadata first: all sessions must agree on the nominal robot unless one is given.
+  const std::vector<Metadata> metas = read_all_metadata(options.sessions);
+  const Nominal robot = nominal_robot(metas, options);
+  Imported imported;
+  for (const std::string& s : options.sessions) import_session(s, robot, options, imported);
+  const std::string yaml = suite_text(metas[0], robot, options, imported);
+  imported.files.push_back({"suite.yaml", yaml});
   if (summary) {
-    for (auto& [name, sum] : sums) {
+    for (auto& [name, sum] : imported.sums) {
       sum.mean_travel_m /= static_cast<double>(sum.runs);
       sum.mean_turn_rad /= static_cast<double>(sum.runs);
       summary->push_back(sum);
     }
   }
-  return files;
+  return imported.files;
 }
 
 }  // namespace odomcov

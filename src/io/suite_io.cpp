@@ -88,6 +88,57 @@ SuiteRun load_log(const std::string& log_file) {
   return run;
 }
 
+/// A logged experiment's runs: its `logs` (a list of one log or more, relative to the suite's
+/// folder `dir`), each within the loader's limits at the suite's wheelbase [m], none twice.
+std::vector<SuiteRun> load_logged_runs(const Where& lw, const YAML::Node& logs,
+                                       const std::filesystem::path& dir, double wheelbase_m) {
+  yaml::require_sequence(lw, logs);
+  if (logs.size() == 0) yaml::fail(lw, logs, "need at least one log");
+  std::vector<SuiteRun> runs;
+  std::set<std::string> ids;
+  for (std::size_t j = 0; j < logs.size(); ++j) {
+    const std::string log = (dir / yaml::to_string(lw.index(j), logs[j])).string();
+    SuiteRun run = load_log(log);
+    if (const std::string e = limits::check_pieces(run.pieces, wheelbase_m); !e.empty()) {
+      throw InputError(log, 0, "", e + " (at the suite's wheelbase)");
+    }
+    if (!ids.insert(run.id).second) yaml::fail(lw.index(j), logs[j], "duplicate log");
+    runs.push_back(std::move(run));
+  }
+  return runs;
+}
+
+/// One experiment of the suite (`experiments[i]` at `xw`): a unique name, an optional
+/// non-empty group, and either a path with its measurement CSV or logged runs.
+SuiteExperiment parse_experiment(const Where& xw, const YAML::Node& node, const std::string& file,
+                                 const std::filesystem::path& dir, double wheelbase_m,
+                                 std::set<std::string>& names) {
+  yaml::require_map(xw, node, {"name", "path", "measurements", "logs", "group"});
+  SuiteExperiment ex;
+  ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
+  if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate experiment name");
+  if (node["group"]) {
+    ex.group = yaml::to_string(xw.child("group"), node["group"]);
+    if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
+  }
+  const bool has_measurements = node["measurements"].IsDefined();
+  const bool has_logs = node["logs"].IsDefined();
+  if (has_measurements == has_logs) {
+    yaml::fail(xw, node, "give either 'path' with 'measurements', or 'logs'");
+  }
+  if (has_measurements) {
+    ex.path = parse_path(yaml::require(xw, node, "path"), file, xw.child("path").key, wheelbase_m);
+    const std::string csv_file =
+        (dir / yaml::to_string(xw.child("measurements"), node["measurements"])).string();
+    ex.runs = load_measurements(csv_file);
+    return ex;
+  }
+  if (node["path"]) yaml::fail(xw.child("path"), node["path"], "logged runs carry their own path");
+  ex.logged = true;
+  ex.runs = load_logged_runs(xw.child("logs"), node["logs"], dir, wheelbase_m);
+  return ex;
+}
+
 }  // namespace
 
 MeasurementNoise parse_measurement_noise(const YAML::Node& node, const std::string& file,
@@ -137,45 +188,7 @@ Suite load_suite_unguarded(const std::string& file) {
   const std::filesystem::path dir = std::filesystem::path(file).parent_path();
   std::set<std::string> names;
   for (std::size_t i = 0; i < list.size(); ++i) {
-    const Where xw = ew.index(i);
-    const YAML::Node node = list[i];
-    yaml::require_map(xw, node, {"name", "path", "measurements", "logs", "group"});
-    SuiteExperiment ex;
-    ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
-    if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate experiment name");
-    if (node["group"]) {
-      ex.group = yaml::to_string(xw.child("group"), node["group"]);
-      if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
-    }
-    const bool has_measurements = node["measurements"].IsDefined();
-    const bool has_logs = node["logs"].IsDefined();
-    if (has_measurements == has_logs) {
-      yaml::fail(xw, node, "give either 'path' with 'measurements', or 'logs'");
-    }
-    if (has_measurements) {
-      ex.path = parse_path(yaml::require(xw, node, "path"), file, xw.child("path").key,
-                           suite.robot.wheelbase_m);
-      const std::string csv_file =
-          (dir / yaml::to_string(xw.child("measurements"), node["measurements"])).string();
-      ex.runs = load_measurements(csv_file);
-    } else {
-      if (node["path"]) yaml::fail(xw.child("path"), node["path"], "logged runs carry their own path");
-      ex.logged = true;
-      const Where lw = xw.child("logs");
-      yaml::require_sequence(lw, node["logs"]);
-      if (node["logs"].size() == 0) yaml::fail(lw, node["logs"], "need at least one log");
-      std::set<std::string> ids;
-      for (std::size_t j = 0; j < node["logs"].size(); ++j) {
-        const std::string log = (dir / yaml::to_string(lw.index(j), node["logs"][j])).string();
-        SuiteRun run = load_log(log);
-        if (const std::string e = limits::check_pieces(run.pieces, suite.robot.wheelbase_m); !e.empty()) {
-          throw InputError(log, 0, "", e + " (at the suite's wheelbase)");
-        }
-        if (!ids.insert(run.id).second) yaml::fail(lw.index(j), node["logs"][j], "duplicate log");
-        ex.runs.push_back(std::move(run));
-      }
-    }
-    suite.experiments.push_back(std::move(ex));
+    suite.experiments.push_back(parse_experiment(ew.index(i), list[i], file, dir, suite.robot.wheelbase_m, names));
   }
   return suite;
 }

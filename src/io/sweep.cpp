@@ -37,6 +37,50 @@ bool is_index(const std::string& s) {
   return !s.empty() && s.find_first_not_of("0123456789") == std::string::npos;
 }
 
+/// The entry of a list that a key part names: an index ("2") or the name of the single-key map
+/// the entry holds ("wheel_diameter_ratio"). Sets `next` to it; returns an error or "".
+std::string list_entry(YAML::Node list, const std::string& part, YAML::Node& next) {
+  if (is_index(part)) {
+    // Compared as text first: an index of any length is past the end of a real list.
+    if (part.size() > 9 || std::stoul(part) >= list.size()) {
+      return "index " + quote(part) + " is past the end of the list";
+    }
+    const std::size_t index = std::stoul(part);
+    next = list[index];
+    return "";
+  }
+  for (std::size_t j = 0; j < list.size(); ++j) {
+    if (list[j].IsMap() && list[j][part]) {
+      next = list[j][part];
+      break;
+    }
+  }
+  if (!next) return "no list entry named " + quote(part);
+  return "";
+}
+
+/// Sets an existing list entry, which must be a scalar, to `value`; returns an error or "".
+std::string set_list_entry(YAML::Node entry, const std::string& part, double value) {
+  if (!entry.IsScalar()) return quote(part) + " is not a number";
+  entry = value;
+  return "";
+}
+
+/// Sets a map's key `part` to `value`, adding it when absent; an existing value must be a
+/// scalar. Returns an error or "".
+std::string set_map_key(YAML::Node map, const std::string& part, double value) {
+  if (map[part] && !map[part].IsScalar()) return quote(part) + " is not a number";
+  map[part] = value;
+  return "";
+}
+
+/// The first `count` parts of a dotted key, joined again ("robot.wheelbase").
+std::string dotted_prefix(const std::vector<std::string>& parts, std::size_t count) {
+  std::string prefix;
+  for (std::size_t j = 0; j < count; ++j) prefix += (j ? "." : "") + parts[j];
+  return prefix;
+}
+
 /// Sets the numeric value at a dotted key. Maps are entered by key and lists by index, or by
 /// the name of the single-key map they hold (effects: "world.effects.wheel_diameter_ratio.Ed").
 /// Every part but the last must exist in the base; the last may be new (the config parser then
@@ -49,45 +93,97 @@ std::string set_dotted(YAML::Node root, const std::string& key, double value) {
     const bool last = i + 1 == parts.size();
     if (node.IsSequence()) {
       YAML::Node next;
-      if (is_index(part)) {
-        // Compared as text first: an index of any length is past the end of a real list.
-        if (part.size() > 9 || std::stoul(part) >= node.size()) {
-          return "index " + quote(part) + " is past the end of the list";
-        }
-        const std::size_t index = std::stoul(part);
-        next = node[index];
-      } else {
-        for (std::size_t j = 0; j < node.size(); ++j) {
-          if (node[j].IsMap() && node[j][part]) {
-            next = node[j][part];
-            break;
-          }
-        }
-        if (!next) return "no list entry named " + quote(part);
-      }
-      if (last) {
-        if (!next.IsScalar()) return quote(part) + " is not a number";
-        next = value;
-        return "";
-      }
+      if (const std::string error = list_entry(node, part, next); !error.empty()) return error;
+      if (last) return set_list_entry(next, part, value);
       node.reset(next);
       continue;
     }
     if (!node.IsMap()) return quote(part) + " is not inside a map";
-    if (last) {
-      if (node[part] && !node[part].IsScalar()) return quote(part) + " is not a number";
-      node[part] = value;
-      return "";
-    }
-    if (!node[part]) {
-      std::string prefix;
-      for (std::size_t j = 0; j <= i; ++j) prefix += (j ? "." : "") + parts[j];
-      return "the base config has no " + quote(prefix);
-    }
+    if (last) return set_map_key(node, part, value);
+    if (!node[part]) return "the base config has no " + quote(dotted_prefix(parts, i + 1));
     YAML::Node next = node[part];
     node.reset(next);
   }
   return "";
+}
+
+/// "point I (axis = value, ...)": a grid point for error messages.
+std::string point_description(const SweepPlan& plan, std::size_t i, const std::vector<double>& values) {
+  std::string text = "point " + std::to_string(i) + " (";
+  for (std::size_t a = 0; a < plan.axes.size(); ++a) {
+    text += (a ? ", " : "") + plan.axes[a].name + " = " + format_number(values[a]);
+  }
+  return text + ")";
+}
+
+/// The line of the axis `name` in the sweep file; 0 when the grid has no such axis.
+int axis_line(const SweepPlan& plan, const char* name) {
+  for (const SweepAxis& a : plan.axes) {
+    if (a.name == name) return a.line;
+  }
+  return 0;
+}
+
+/// The convenience axes' factors of a point (1 where absent), and whether simulation.runs is
+/// an axis.
+struct PointScales {
+  double noise = 1.0, path = 1.0;
+  bool runs_on_axis = false;
+};
+
+/// Writes a point's values of the config-key axes into the base config `root`, and collects
+/// those of noise_scale and path_scale.
+PointScales set_axes(const SweepPlan& plan, const std::vector<double>& values, YAML::Node root) {
+  PointScales scales;
+  for (std::size_t a = 0; a < plan.axes.size(); ++a) {
+    const SweepAxis& axis = plan.axes[a];
+    if (axis.name == "noise_scale") {
+      scales.noise *= values[a];
+    } else if (axis.name == "path_scale") {
+      scales.path *= values[a];
+    } else {
+      scales.runs_on_axis = scales.runs_on_axis || axis.name == "simulation.runs";
+      const std::string error = set_dotted(root, axis.name, values[a]);
+      if (!error.empty()) throw InputError(plan.file, axis.line, "grid." + axis.name, error);
+    }
+  }
+  return scales;
+}
+
+/// The point's config parsed; bad input names the sweep file and the axis whose key the
+/// error's key starts with (the last such axis), else "base".
+Config parse_point(const SweepPlan& plan, const YAML::Node& root, const std::string& description) {
+  try {
+    return parse_config(root, plan.base_file);
+  } catch (const InputError& e) {
+    const SweepAxis* axis = nullptr;
+    for (const SweepAxis& a : plan.axes) {
+      if (e.key().rfind(a.name, 0) == 0) axis = &a;
+    }
+    throw InputError(plan.file, axis ? axis->line : 0, axis ? "grid." + axis->name : "base",
+                     description + ": " + e.key() + ": " + e.message());
+  }
+}
+
+/// Applies noise_scale to the wheel noise (the simulated world's and the model's alike) and
+/// path_scale to the path, each checked against the numeric limits.
+void scale_point(const SweepPlan& plan, const PointScales& scales, const std::string& description,
+                 Config& config) {
+  for (WheelNoise* noise : {&config.robot.noise, &config.world.noise}) {
+    noise->k_left *= scales.noise;
+    noise->k_right *= scales.noise;
+    if (const std::string e = limits::check_wheel_noise(*noise); !e.empty()) {
+      throw InputError(plan.file, axis_line(plan, "noise_scale"), "grid.noise_scale", description + ": " + e);
+    }
+  }
+  if (scales.path != 1.0) {
+    config.path = scale_path(config.path, scales.path);
+    if (const std::string e = limits::check_path(config.path, config.robot.wheelbase_m); !e.empty()) {
+      throw InputError(plan.file, axis_line(plan, "path_scale"), "grid.path_scale", description + ": " + e);
+    }
+    check_simulation_size(plan.file, axis_line(plan, "path_scale"), "grid.path_scale", config.simulation.runs,
+                          sample_count(config.path));
+  }
 }
 
 }  // namespace
@@ -118,67 +214,18 @@ Config SweepPlan::point_config(std::size_t i) const {
 Config SweepPlan::point_config_unguarded(std::size_t i) const {
   const std::vector<double> values = point_values(i);
   YAML::Node root = YAML::Clone(base->root);
-  double noise_scale = 1.0, path_scale = 1.0;
-  bool runs_on_axis = false;
-  auto describe = [&] {
-    std::string text = "point " + std::to_string(i) + " (";
-    for (std::size_t a = 0; a < axes.size(); ++a) {
-      text += (a ? ", " : "") + axes[a].name + " = " + format_number(values[a]);
-    }
-    return text + ")";
-  };
-  for (std::size_t a = 0; a < axes.size(); ++a) {
-    const SweepAxis& axis = axes[a];
-    if (axis.name == "noise_scale") {
-      noise_scale *= values[a];
-    } else if (axis.name == "path_scale") {
-      path_scale *= values[a];
-    } else {
-      runs_on_axis = runs_on_axis || axis.name == "simulation.runs";
-      const std::string error = set_dotted(root, axis.name, values[a]);
-      if (!error.empty()) throw InputError(file, axis.line, "grid." + axis.name, error);
-    }
-  }
-  if (runs > 0 && !runs_on_axis) {
+  const PointScales scales = set_axes(*this, values, root);
+  if (runs > 0 && !scales.runs_on_axis) {
     if (root["simulation"] && !root["simulation"].IsMap()) {
       throw InputError(base_file, yaml::line_of(root["simulation"]), "simulation", "expected a map");
     }
     root["simulation"]["runs"] = runs;
   }
-  Config config;
-  try {
-    config = parse_config(root, base_file);
-  } catch (const InputError& e) {
-    const SweepAxis* axis = nullptr;
-    for (const SweepAxis& a : axes) {
-      if (e.key().rfind(a.name, 0) == 0) axis = &a;
-    }
-    throw InputError(file, axis ? axis->line : 0, axis ? "grid." + axis->name : "base",
-                     describe() + ": " + e.key() + ": " + e.message());
-  }
+  const std::string description = point_description(*this, i, values);
+  Config config = parse_point(*this, root, description);
   config.simulation.seed = point_seed(i);
   // The wheel noise itself scales: the simulated world's and the model's alike.
-  auto axis_line = [&](const char* name) {
-    for (const SweepAxis& a : axes) {
-      if (a.name == name) return a.line;
-    }
-    return 0;
-  };
-  for (WheelNoise* noise : {&config.robot.noise, &config.world.noise}) {
-    noise->k_left *= noise_scale;
-    noise->k_right *= noise_scale;
-    if (const std::string e = limits::check_wheel_noise(*noise); !e.empty()) {
-      throw InputError(file, axis_line("noise_scale"), "grid.noise_scale", describe() + ": " + e);
-    }
-  }
-  if (path_scale != 1.0) {
-    config.path = scale_path(config.path, path_scale);
-    if (const std::string e = limits::check_path(config.path, config.robot.wheelbase_m); !e.empty()) {
-      throw InputError(file, axis_line("path_scale"), "grid.path_scale", describe() + ": " + e);
-    }
-    check_simulation_size(file, axis_line("path_scale"), "grid.path_scale", config.simulation.runs,
-                          sample_count(config.path));
-  }
+  scale_point(*this, scales, description, config);
   return config;
 }
 

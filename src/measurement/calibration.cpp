@@ -170,47 +170,62 @@ double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int*
 struct Information {
   Eigen::MatrixXd H, J;
 };
+/// The runs' terms at u moved by si h_i along coordinate i and by sj h_j along j.
+std::vector<double> terms_at(const Terms& terms, const std::vector<double>& u, const std::vector<double>& h,
+                             std::size_t i, std::size_t j, double si, double sj) {
+  std::vector<double> x = u;
+  x[i] += si * h[i];
+  x[j] += sj * h[j];
+  return terms(x);
+}
+
+/// One pass of central differences of -log L around u (where it is `best`) with steps h: H,
+/// and each run's score per coordinate from the diagonal's points u +/- h_i.
+void difference_pass(const Terms& terms, const std::vector<double>& u, double best,
+                     const std::vector<double>& h, Eigen::MatrixXd& H,
+                     std::vector<std::vector<double>>& scores) {
+  const std::size_t n = u.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = i; j < n; ++j) {
+      auto at = [&](double si, double sj) { return negative_sum(terms_at(terms, u, h, i, j, si, sj)); };
+      if (i == j) {
+        const std::vector<double> up = terms_at(terms, u, h, i, j, 1, 0), down = terms_at(terms, u, h, i, j, -1, 0);
+        H(i, i) = (negative_sum(up) - 2 * best + negative_sum(down)) / (h[i] * h[i]);
+        scores[i].resize(up.size());
+        for (std::size_t r = 0; r < up.size(); ++r) scores[i][r] = (up[r] - down[r]) / (2 * h[i]);
+      } else {
+        H(i, j) = (at(1, 1) - at(1, -1) - at(-1, 1) + at(-1, -1)) / (4 * h[i] * h[j]);
+        H(j, i) = H(i, j);
+      }
+    }
+  }
+}
+
+/// J += the sum over the runs of their score outer products.
+void add_score_products(const std::vector<std::vector<double>>& scores, Eigen::MatrixXd& J) {
+  const std::size_t n = scores.size();
+  for (std::size_t r = 0; r < scores[0].size(); ++r) {
+    for (std::size_t i = 0; i < n; ++i) {
+      for (std::size_t j = 0; j < n; ++j) {
+        J(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) += scores[i][r] * scores[j][r];
+      }
+    }
+  }
+}
+
 Information information(const Terms& terms, const std::vector<double>& u, double best, const Box& box) {
   const std::size_t n = u.size();
   std::vector<double> h(n);
   for (std::size_t i = 0; i < n; ++i) h[i] = 1e-2 * box.step[i];
   Information info{Eigen::MatrixXd(n, n), Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n))};
-  Eigen::MatrixXd& H = info.H;
   std::vector<std::vector<double>> scores(n);
-  for (int pass = 0; pass < 2; ++pass) {
-    for (std::size_t i = 0; i < n; ++i) {
-      for (std::size_t j = i; j < n; ++j) {
-        auto at_terms = [&](double si, double sj) {
-          std::vector<double> x = u;
-          x[i] += si * h[i];
-          x[j] += sj * h[j];
-          return terms(x);
-        };
-        auto at = [&](double si, double sj) { return negative_sum(at_terms(si, sj)); };
-        if (i == j) {
-          const std::vector<double> up = at_terms(1, 0), down = at_terms(-1, 0);
-          H(i, i) = (negative_sum(up) - 2 * best + negative_sum(down)) / (h[i] * h[i]);
-          scores[i].resize(up.size());
-          for (std::size_t r = 0; r < up.size(); ++r) scores[i][r] = (up[r] - down[r]) / (2 * h[i]);
-        } else {
-          H(i, j) = (at(1, 1) - at(1, -1) - at(-1, 1) + at(-1, -1)) / (4 * h[i] * h[j]);
-          H(j, i) = H(i, j);
-        }
-      }
-    }
-    if (pass == 0) {
-      for (std::size_t i = 0; i < n; ++i) {
-        if (H(i, i) > 0) h[i] = std::clamp(0.2 / std::sqrt(H(i, i)), 1e-9, box.step[i]);
-      }
-    }
+  difference_pass(terms, u, best, h, info.H, scores);
+  // The second pass: steps of a fifth of the first pass's standard errors (within the box's).
+  for (std::size_t i = 0; i < n; ++i) {
+    if (info.H(i, i) > 0) h[i] = std::clamp(0.2 / std::sqrt(info.H(i, i)), 1e-9, box.step[i]);
   }
-  for (std::size_t r = 0; r < scores[0].size(); ++r) {
-    for (std::size_t i = 0; i < n; ++i) {
-      for (std::size_t j = 0; j < n; ++j) {
-        info.J(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) += scores[i][r] * scores[j][r];
-      }
-    }
-  }
+  difference_pass(terms, u, best, h, info.H, scores);
+  add_score_products(scores, info.J);
   return info;
 }
 

@@ -125,18 +125,36 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex,
   return c;
 }
 
-/// Where one experiment fails, worst component first (the CLI words them: src/cli/failures.cpp).
-void add_failures(const ExperimentComparison& c, int index, double alpha_test,
-                  std::vector<Failure>& out) {
-  if (c.mean_test.valid && c.mean_test.p_value < alpha_test) {
-    int worst = 0;
-    for (int k = 1; k < kDim; ++k) worst = c.mean_p(k) < c.mean_p(worst) ? k : worst;
-    for (int k = 0; k < kDim; ++k) {
-      if (k != worst && !(c.mean_p(k) < alpha_test)) continue;
-      out.push_back({Failure::Kind::mean, index, k, k});
+/// The mean failures of an experiment whose mean test fails: its worst component, and every
+/// other component significant on its own.
+void add_mean_failures(const ExperimentComparison& c, int index, double alpha_test, std::vector<Failure>& out) {
+  int worst = 0;
+  for (int k = 1; k < kDim; ++k) worst = c.mean_p(k) < c.mean_p(worst) ? k : worst;
+  for (int k = 0; k < kDim; ++k) {
+    if (k != worst && !(c.mean_p(k) < alpha_test)) continue;
+    out.push_back({Failure::Kind::mean, index, k, k});
+  }
+}
+
+/// The correlation failure: the pair of components whose measured and predicted correlations
+/// differ most.
+Failure worst_correlation(const ExperimentComparison& c, int index) {
+  double worst = -1;
+  Failure f{Failure::Kind::correlation, index, 0, 1};
+  for (int a = 0; a < kDim; ++a) {
+    for (int b = a + 1; b < kDim; ++b) {
+      const double d = std::abs(c.measured_correlation(a, b) - c.predicted_correlation(a, b));
+      if (d > worst) worst = d, f.component = a, f.other = b;
     }
   }
-  if (!(c.cov_test.valid && c.cov_test.p_value < alpha_test)) return;
+  return f;
+}
+
+/// The covariance failures of an experiment whose covariance test fails: the components whose
+/// variance is significantly off; else the spread as a whole (the NEES test); else the worst
+/// correlation.
+void add_covariance_failures(const ExperimentComparison& c, int index, double alpha_test,
+                             std::vector<Failure>& out) {
   bool named = false;
   for (int k = 0; k < kDim; ++k) {
     if (!(c.variance_p(k) < alpha_test)) continue;
@@ -148,15 +166,112 @@ void add_failures(const ExperimentComparison& c, int index, double alpha_test,
     out.push_back({Failure::Kind::spread, index, 0, 0});
     return;
   }
-  double worst = -1;
-  Failure f{Failure::Kind::correlation, index, 0, 1};
-  for (int a = 0; a < kDim; ++a) {
-    for (int b = a + 1; b < kDim; ++b) {
-      const double d = std::abs(c.measured_correlation(a, b) - c.predicted_correlation(a, b));
-      if (d > worst) worst = d, f.component = a, f.other = b;
-    }
+  out.push_back(worst_correlation(c, index));
+}
+
+/// Where one experiment fails, worst component first (the CLI words them: src/cli/failures.cpp).
+void add_failures(const ExperimentComparison& c, int index, double alpha_test,
+                  std::vector<Failure>& out) {
+  if (c.mean_test.valid && c.mean_test.p_value < alpha_test) add_mean_failures(c, index, alpha_test, out);
+  if (c.cov_test.valid && c.cov_test.p_value < alpha_test) add_covariance_failures(c, index, alpha_test, out);
+}
+
+/// Mardia's multivariate kurtosis b2 [Mardia70] of one experiment's whitened residuals z, each
+/// standardised by the experiment's own mean and (maximum-likelihood) covariance.
+double mardia_b2(const std::vector<Vector3>& z) {
+  const double n = static_cast<double>(z.size());
+  const SampleMoments m = moments(z);
+  const Matrix3 S = m.cov * ((n - 1) / n);
+  const Eigen::LLT<Matrix3> llt(S);
+  double b2 = 0.0;
+  for (const Vector3& v : z) {
+    const double q = (v - m.mean).dot(llt.solve(v - m.mean));
+    b2 += q * q / n;
   }
-  out.push_back(f);
+  return b2;
+}
+
+/// The experiments' kurtoses pooled with Mardia's exact moments [Mardia74], weighted by their
+/// run counts n: E b2 = p(p+2)(n-1)/(n+1),
+/// Var b2 = 8p(p+2)(n-3)(n-p-1)(n-p+1)/((n+1)^2 (n+3)(n+5)), z = sum n(b2 - E)/sqrt(sum n^2 Var).
+struct KurtosisPool {
+  double excess = 0.0, variance = 0.0, weight = 0.0, b2_sum = 0.0, expected_sum = 0.0;
+
+  /// Adds an experiment's whitened residuals; returns its b2/E b2.
+  double add(const std::vector<Vector3>& z) {
+    const double n = static_cast<double>(z.size());
+    const double b2 = mardia_b2(z);
+    constexpr double p = kDim;
+    const double expected = p * (p + 2) * (n - 1) / (n + 1);
+    const double var = 8 * p * (p + 2) * (n - 3) * (n - p - 1) * (n - p + 1) /
+                       ((n + 1) * (n + 1) * (n + 3) * (n + 5));
+    excess += n * (b2 - expected);
+    variance += n * n * var;
+    weight += n;
+    b2_sum += n * b2;
+    expected_sum += n * expected;
+    return b2 / expected;
+  }
+};
+
+/// A model with a heavy-tailed effect (bumps) predicts tails: then the kurtosis is
+/// information, not a failure, and a Gaussian LRT's null distribution is wider by the
+/// kurtosis factor 1 + kappa = b2/E b2, so each experiment's statistic is divided by its own
+/// factor `kurtosis_ratio` (the scaled test of [Browne84] for elliptical errors) before the
+/// verdicts. Its own: a short experiment sees a bump or two per run and far heavier tails
+/// than a long one.
+void scale_by_kurtosis(Comparison& out, const std::vector<double>& kurtosis_ratio) {
+  out.kurtosis_scale = out.mardia_b2 / out.mardia_expected;
+  for (std::size_t i = 0; i < out.experiments.size(); ++i) {
+    ExperimentComparison& e = out.experiments[i];
+    if (e.cov_method != "lrt" || !e.cov_test.valid) continue;
+    e.cov_test.statistic /= std::max(1.0, kurtosis_ratio[i]);
+    e.cov_test.p_value = chi2_sf(e.cov_test.statistic, e.cov_test.dof);
+    e.cov_method = "lrt, kurtosis-scaled";
+    e.verdict = verdict(e.mean_test, e.cov_test, out.alpha_per_test);
+  }
+}
+
+/// The pooled kurtosis test (two-sided normal), with the covariance LRTs scaled when the model
+/// expects tails; not valid when no experiment is large enough to tell a shape.
+void kurtosis_test(const KurtosisPool& pool, bool tails_expected,
+                   const std::vector<double>& kurtosis_ratio, Comparison& out) {
+  if (!(pool.weight > 0)) {
+    out.kurtosis.valid = false;  // no experiment is large enough to tell a shape
+    return;
+  }
+  out.mardia_b2 = pool.b2_sum / pool.weight;
+  out.mardia_expected = pool.expected_sum / pool.weight;
+  if (tails_expected && out.mardia_b2 > out.mardia_expected) scale_by_kurtosis(out, kurtosis_ratio);
+  out.kurtosis.statistic = pool.excess / std::sqrt(pool.variance);
+  out.kurtosis.dof = 0;
+  out.kurtosis.p_value = 2.0 * boost::math::cdf(boost::math::complement(
+                                   boost::math::normal(), std::abs(out.kurtosis.statistic)));
+}
+
+/// The overall verdict and the failures, worst experiment first (smallest p-value, ties of
+/// p underflowing to 0 broken by the NEES per run), then the tails unless the model
+/// expects them.
+void verdict_and_failures(Comparison& out, bool tails_expected) {
+  std::vector<const ExperimentComparison*> order;
+  for (const auto& c : out.experiments) order.push_back(&c);
+  auto worst_p = [](const ExperimentComparison* c) {
+    return std::min(c->mean_test.valid ? c->mean_test.p_value : 1.0,
+                    c->cov_test.valid ? c->cov_test.p_value : 1.0);
+  };
+  std::stable_sort(order.begin(), order.end(), [&](auto* a, auto* b) {
+    return worst_p(a) != worst_p(b) ? worst_p(a) < worst_p(b) : a->nees_mean > b->nees_mean;
+  });
+  Verdict overall;
+  for (const ExperimentComparison* c : order) {
+    overall.combine(c->verdict);
+    add_failures(*c, static_cast<int>(c - out.experiments.data()), out.alpha_per_test, out.failures);
+  }
+  if (out.kurtosis.valid && out.kurtosis.p_value < out.alpha_per_test && !tails_expected) {
+    overall.combine({Verdict::Kind::inconsistent, ""});
+    out.failures.push_back({Failure::Kind::tails, -1, 0, 0});
+  }
+  out.verdict = overall;
 }
 
 }  // namespace
@@ -183,86 +298,21 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
   // Mardia's multivariate kurtosis [Mardia70] as a test of shape only: each experiment's
   // whitened residuals are standardised by that experiment's own mean and covariance (so scale
   // and mean misfits, which differ between experiments, do not read as tails), and the
-  // experiments with at least kMinRunsForLrt runs are combined with Mardia's exact moments
-  // [Mardia74]: E b2 = p(p+2)(n-1)/(n+1),
-  // Var b2 = 8p(p+2)(n-3)(n-p-1)(n-p+1)/((n+1)^2 (n+3)(n+5)), z = sum n(b2 - E)/sqrt(sum n^2 Var).
+  // experiments with at least kMinRunsForLrt runs are pooled (KurtosisPool).
   bool tails_expected = false;
   for (const EffectSpec& e : model.effects) tails_expected = tails_expected || info_of(e)->heavy_tails;
-  double excess = 0.0, variance = 0.0, weight = 0.0, b2_sum = 0.0;
+  KurtosisPool pool;
   std::vector<double> kurtosis_ratio(suite.experiments.size(), 1.0);  // b2/E b2 per experiment
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     std::vector<Vector3> z;
     out.experiments.push_back(
         compare_experiment(suite.experiments[e], res[e], own[e], out.alpha_per_test, z));
     out.log_likelihood += out.experiments.back().log_likelihood;
-    const double n = static_cast<double>(z.size());
     if (z.size() < static_cast<std::size_t>(kMinRunsForLrt)) continue;
-    const SampleMoments m = moments(z);
-    const Matrix3 S = m.cov * ((n - 1) / n);
-    const Eigen::LLT<Matrix3> llt(S);
-    double b2 = 0.0;
-    for (const Vector3& v : z) {
-      const double q = (v - m.mean).dot(llt.solve(v - m.mean));
-      b2 += q * q / n;
-    }
-    constexpr double p = kDim;
-    const double expected = p * (p + 2) * (n - 1) / (n + 1);
-    const double var = 8 * p * (p + 2) * (n - 3) * (n - p - 1) * (n - p + 1) /
-                       ((n + 1) * (n + 1) * (n + 3) * (n + 5));
-    kurtosis_ratio[e] = b2 / expected;
-    excess += n * (b2 - expected);
-    variance += n * n * var;
-    weight += n;
-    b2_sum += n * b2;
-    out.mardia_expected += n * expected;
+    kurtosis_ratio[e] = pool.add(z);
   }
-  if (weight > 0) {
-    out.mardia_b2 = b2_sum / weight;
-    out.mardia_expected /= weight;
-    // A model with a heavy-tailed effect (bumps) predicts tails: then the kurtosis is
-    // information, not a failure, and a Gaussian LRT's null distribution is wider by the
-    // kurtosis factor 1 + kappa = b2/E b2, so each experiment's statistic is divided by its own
-    // factor (the scaled test of [Browne84] for elliptical errors) before the verdicts. Its own:
-    // a short experiment sees a bump or two per run and far heavier tails than a long one.
-    if (tails_expected && out.mardia_b2 > out.mardia_expected) {
-      out.kurtosis_scale = out.mardia_b2 / out.mardia_expected;
-      for (std::size_t i = 0; i < out.experiments.size(); ++i) {
-        ExperimentComparison& e = out.experiments[i];
-        if (e.cov_method != "lrt" || !e.cov_test.valid) continue;
-        e.cov_test.statistic /= std::max(1.0, kurtosis_ratio[i]);
-        e.cov_test.p_value = chi2_sf(e.cov_test.statistic, e.cov_test.dof);
-        e.cov_method = "lrt, kurtosis-scaled";
-        e.verdict = verdict(e.mean_test, e.cov_test, out.alpha_per_test);
-      }
-    }
-    out.kurtosis.statistic = excess / std::sqrt(variance);
-    out.kurtosis.dof = 0;
-    out.kurtosis.p_value = 2.0 * boost::math::cdf(boost::math::complement(
-                                     boost::math::normal(), std::abs(out.kurtosis.statistic)));
-  } else {
-    out.kurtosis.valid = false;  // no experiment is large enough to tell a shape
-  }
-
-  std::vector<const ExperimentComparison*> order;
-  for (const auto& c : out.experiments) order.push_back(&c);
-  auto worst_p = [](const ExperimentComparison* c) {
-    return std::min(c->mean_test.valid ? c->mean_test.p_value : 1.0,
-                    c->cov_test.valid ? c->cov_test.p_value : 1.0);
-  };
-  // Worst first: smallest p-value, ties (p underflowing to 0) broken by the NEES per run.
-  std::stable_sort(order.begin(), order.end(), [&](auto* a, auto* b) {
-    return worst_p(a) != worst_p(b) ? worst_p(a) < worst_p(b) : a->nees_mean > b->nees_mean;
-  });
-  Verdict overall;
-  for (const ExperimentComparison* c : order) {
-    overall.combine(c->verdict);
-    add_failures(*c, static_cast<int>(c - out.experiments.data()), out.alpha_per_test, out.failures);
-  }
-  if (out.kurtosis.valid && out.kurtosis.p_value < out.alpha_per_test && !tails_expected) {
-    overall.combine({Verdict::Kind::inconsistent, ""});
-    out.failures.push_back({Failure::Kind::tails, -1, 0, 0});
-  }
-  out.verdict = overall;
+  kurtosis_test(pool, tails_expected, kurtosis_ratio, out);
+  verdict_and_failures(out, tails_expected);
   return out;
 }
 

@@ -263,6 +263,153 @@ void apply_tail_rule(std::vector<Candidate>& candidates, const std::vector<Candi
   }
 }
 
+/// What every candidate fit of a round shares: the suite and the fit settings, the model
+/// before the round (`before`: its comparison, whose kurtosis scales random candidates' tests)
+/// and the base every candidate must improve on, the model's own effects refitted, with their
+/// names by kind and the base's log-likelihoods (full, scatter part, per experiment).
+struct Round {
+  const Suite& suite;
+  const Comparison& before;
+  bool heavy_tails;
+  DiagnoseProgress* progress;
+  FitPath path;
+  ResidualCache& cache;
+  FittedNames nuisance;
+  SuiteModel base;
+  double base_full = 0.0, base_scatter = 0.0;
+  std::vector<double> base_by_experiment;
+};
+
+/// The round's base: each candidate refits the model's effects of its own kind with it
+/// (systematic ones on the full likelihood, random ones on the scatter part); the others stay
+/// at these refitted values.
+Round start_round(const Suite& suite, const SuiteModel& model, const Comparison& before,
+                  bool heavy_tails, DiagnoseProgress* progress, FitPath path, ResidualCache& cache) {
+  Round round{suite, before, heavy_tails, progress, path, cache, split_fitted_names(model.effects),
+              refit(suite, model, progress, path, cache), 0.0, 0.0, {}};
+  const auto& base_residuals = cache.at(round.base);
+  round.base_full = log_likelihood(base_residuals);
+  round.base_scatter = scatter_log_likelihood(base_residuals);
+  round.base_by_experiment = experiment_log_likelihoods(base_residuals);
+  return round;
+}
+
+/// The p-value of a fitted candidate's likelihood-ratio test on its part of the likelihood:
+/// chi^2 with its own parameters as degrees of freedom, halved on the boundary.
+double candidate_p_value(const Round& round, const CandidateType& type, const Candidate& c) {
+  double lr = 2.0 * c.delta_log_likelihood;
+  // Heavy tails widen the null distribution of a Gaussian variance LRT by the kurtosis factor
+  // (the scaled test of [Browne84]); the same factor compare uses.
+  const Comparison& before = round.before;
+  if (!c.systematic && round.heavy_tails && before.mardia_b2 > before.mardia_expected) {
+    lr /= before.mardia_b2 / before.mardia_expected;
+  }
+  lr = std::max(0.0, lr);
+  return lr == 0.0 ? 1.0 : (type.on_boundary ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
+}
+
+/// The (at most two) experiments where the candidate raised the full log-likelihood most over
+/// the base, with their gains.
+std::vector<std::pair<std::string, double>> evidence_of(
+    const Round& round, const std::vector<std::vector<RunResidual>>& candidate_residuals) {
+  const std::vector<double> by_experiment = experiment_log_likelihoods(candidate_residuals);
+  std::vector<std::pair<std::string, double>> gains;
+  for (std::size_t e = 0; e < round.suite.experiments.size(); ++e) {
+    gains.push_back({round.suite.experiments[e].name, by_experiment[e] - round.base_by_experiment[e]});
+  }
+  std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.second > b.second; });
+  std::vector<std::pair<std::string, double>> evidence;
+  for (std::size_t i = 0; i < gains.size() && i < 2; ++i) {
+    if (gains[i].second > 0) evidence.push_back(gains[i]);
+  }
+  return evidence;
+}
+
+/// Fits one candidate on the base with the nuisance parameters of its kind and judges it:
+/// delta log-likelihood on its part of the likelihood, delta BIC, p-value, its reported
+/// parameters and where it showed most.
+Candidate fit_candidate(const Round& round, const CandidateType& type, double log_runs) {
+  Candidate c;
+  c.effect = type.name;
+  c.physics = type.physics;
+  c.signature = type.signature;
+  c.robot = type.robot;
+  c.systematic = type.systematic;
+  std::vector<std::string> fitted = c.systematic ? round.nuisance.systematic : round.nuisance.random;
+  const std::vector<std::string>& own = type.fitted;
+  fitted.insert(fitted.end(), own.begin(), own.end());
+  const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
+  SuiteModel start = round.base;
+  start.effects.insert(start.effects.end(), type.start.begin(), type.start.end());
+  const FitResult f = fit(round.suite, start, fitted, kind,
+                          round.progress ? &round.progress->evaluations : nullptr, round.path, &round.cache);
+  // With heavy tails the observed information understates the uncertainty: sandwich SEs.
+  const Eigen::VectorXd& se = round.heavy_tails ? f.robust_stderrs : f.stderrs;
+  c.model = f.model;
+  c.dof = static_cast<int>(own.size());
+  // Each candidate is judged on the part of the likelihood it explains: the full one for a
+  // systematic effect, the scatter part for a random one (whose extra variance would
+  // otherwise also "explain" any mean misfit). The gains are on one scale; delta BIC ranks.
+  c.delta_log_likelihood = f.log_likelihood_after - (c.systematic ? round.base_full : round.base_scatter);
+  c.delta_bic = -2.0 * c.delta_log_likelihood + c.dof * log_runs;
+  c.p_value = candidate_p_value(round, type, c);
+  describe_fit(round.suite, type, static_cast<Eigen::Index>(fitted.size() - own.size()), se, c);
+  const auto& candidate_residuals = round.cache.at(c.model);
+  c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - round.base_full;
+  c.evidence = evidence_of(round, candidate_residuals);
+  return c;
+}
+
+/// The decision rules: significance at alpha shared among the candidates (Bonferroni), then
+/// significant candidates first, each group by delta BIC, and the tail rule.
+void rank_candidates(Diagnosis& d, const std::vector<CandidateType>& types) {
+  const double per_candidate = d.alpha / static_cast<double>(std::max<std::size_t>(1, d.candidates.size()));
+  for (Candidate& c : d.candidates) c.significant = c.p_value < per_candidate;
+  std::stable_sort(d.candidates.begin(), d.candidates.end(), [&](const Candidate& a, const Candidate& b) {
+    return a.significant != b.significant ? a.significant : a.delta_bic < b.delta_bic;
+  });
+  apply_tail_rule(d.candidates, types, d.heavy_tails);
+}
+
+/// Adopts the best (significant) candidate: its model with everything refitted by its part of
+/// the likelihood, now that the new effect is in (the earlier effects were sized without it),
+/// and its reported values from that model.
+void adopt_best(Diagnosis& d, const std::vector<CandidateType>& types, const Round& round) {
+  d.best = 0;
+  Candidate& best = d.candidates.front();
+  // (When every effect is of the candidate's kind and nothing was completed after its fit,
+  // the candidate's own fit was already that refit: all of them jointly on its likelihood.)
+  const CandidateType& type = *std::find_if(
+      types.begin(), types.end(), [&](const CandidateType& t) { return t.name == best.effect; });
+  bool other_kind = type.complete != nullptr;
+  for (const EffectSpec& e : best.model.effects) {
+    other_kind = other_kind || info_of(e)->systematic != best.systematic;
+  }
+  if (other_kind) best.model = refit(round.suite, best.model, round.progress, round.path, round.cache);
+  if (reported_by_names(type)) {
+    for (std::size_t i = 0; i < type.fitted.size(); ++i) {
+      best.values[i] = fitted_value(best.model, type.fitted[i]);
+    }
+  } else {
+    // completed ones stay, fitted ones refitted
+    best.values = find_spec(best.model.effects, type.effect)->values;
+  }
+}
+
+/// The outcome: the final model (the best candidate's, else the suite's) compared again, its
+/// corrected odometry and, when it still misfits, what the misfit lines up with.
+void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, ResidualCache& cache) {
+  d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, d.alpha,
+                                       cache.at(d.candidates[*d.best].model)))
+                   : d.before;
+  d.explained = d.after.verdict == "consistent";
+  d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
+  if (!d.explained) {
+    const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
+    d.residuals = residual_alignment(suite, final_model, cache.at(final_model));
+  }
+}
+
 }  // namespace
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
@@ -279,16 +426,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   d.kurtosis = before.kurtosis;
   d.heavy_tails = d.kurtosis.valid && d.kurtosis.statistic > 0 && d.kurtosis.p_value < alpha;
 
-  // The model's own effects, refitted: the reference every candidate must improve on. Each
-  // candidate refits the model's effects of its own kind with it (systematic ones on the full
-  // likelihood, random ones on the scatter part); the others stay at their refitted values.
-  const FittedNames nuisance = split_fitted_names(model.effects);
-  const SuiteModel base = refit(suite, model, progress, path, cache);
-  const auto& base_residuals = cache.at(base);
-  const double base_full = log_likelihood(base_residuals);
-  const double base_scatter = scatter_log_likelihood(base_residuals);
-  const std::vector<double> base_by_experiment = experiment_log_likelihoods(base_residuals);
-
+  // The model's own effects, refitted: the reference every candidate must improve on.
+  const Round round = start_round(suite, model, before, d.heavy_tails, progress, path, cache);
   const std::vector<CandidateType> types =
       round_candidates(suite, model.effects, only, candidates, path == FitPath::fast);
 
@@ -296,93 +435,14 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
   if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
   const double log_runs = std::log(static_cast<double>(d.runs));
   for (const CandidateType& type : types) {
-    Candidate c;
-    c.effect = type.name;
-    c.physics = type.physics;
-    c.signature = type.signature;
-    c.robot = type.robot;
-    c.systematic = type.systematic;
-    std::vector<std::string> fitted = c.systematic ? nuisance.systematic : nuisance.random;
-    const std::vector<std::string>& own = type.fitted;
-    fitted.insert(fitted.end(), own.begin(), own.end());
-    const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
-    SuiteModel start = base;
-    start.effects.insert(start.effects.end(), type.start.begin(), type.start.end());
-    const FitResult f =
-        fit(suite, start, fitted, kind, progress ? &progress->evaluations : nullptr, path, &cache);
-    // With heavy tails the observed information understates the uncertainty: sandwich SEs.
-    const Eigen::VectorXd& se = d.heavy_tails ? f.robust_stderrs : f.stderrs;
-    c.model = f.model;
-    c.dof = static_cast<int>(own.size());
-    // Each candidate is judged on the part of the likelihood it explains: the full one for a
-    // systematic effect, the scatter part for a random one (whose extra variance would
-    // otherwise also "explain" any mean misfit). The gains are on one scale; delta BIC ranks.
-    c.delta_log_likelihood = f.log_likelihood_after - (c.systematic ? base_full : base_scatter);
-    c.delta_bic = -2.0 * c.delta_log_likelihood + c.dof * log_runs;
-    double lr = 2.0 * c.delta_log_likelihood;
-    // Heavy tails widen the null distribution of a Gaussian variance LRT by the kurtosis factor
-    // (the scaled test of [Browne84]); the same factor compare uses.
-    if (!c.systematic && d.heavy_tails && before.mardia_b2 > before.mardia_expected) {
-      lr /= before.mardia_b2 / before.mardia_expected;
-    }
-    lr = std::max(0.0, lr);
-    c.p_value = lr == 0.0 ? 1.0 : (type.on_boundary ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
-    describe_fit(suite, type, static_cast<Eigen::Index>(fitted.size() - own.size()), se, c);
-    const auto& candidate_residuals = cache.at(c.model);
-    c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - base_full;
-    const std::vector<double> by_experiment = experiment_log_likelihoods(candidate_residuals);
-    std::vector<std::pair<std::string, double>> gains;
-    for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
-      gains.push_back({suite.experiments[e].name, by_experiment[e] - base_by_experiment[e]});
-    }
-    std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.second > b.second; });
-    for (std::size_t i = 0; i < gains.size() && i < 2; ++i) {
-      if (gains[i].second > 0) c.evidence.push_back(gains[i]);
-    }
-    d.candidates.push_back(std::move(c));
+    d.candidates.push_back(fit_candidate(round, type, log_runs));
     if (progress) ++progress->fits_done;
   }
 
-  const double per_candidate = alpha / static_cast<double>(std::max<std::size_t>(1, d.candidates.size()));
-  for (Candidate& c : d.candidates) c.significant = c.p_value < per_candidate;
-  // Ranking: significant candidates first, each group by delta BIC.
-  std::stable_sort(d.candidates.begin(), d.candidates.end(), [&](const Candidate& a, const Candidate& b) {
-    return a.significant != b.significant ? a.significant : a.delta_bic < b.delta_bic;
-  });
-  apply_tail_rule(d.candidates, types, d.heavy_tails);
-  if (!d.candidates.empty() && d.candidates.front().significant) {
-    d.best = 0;
-    // The model to adopt: everything refitted by its part of the likelihood, now that the new
-    // effect is in (the earlier effects were sized without it).
-    Candidate& best = d.candidates.front();
-    // (When every effect is of the candidate's kind and nothing was completed after its fit,
-    // the candidate's own fit was already that refit: all of them jointly on its likelihood.)
-    const CandidateType& type = *std::find_if(
-        types.begin(), types.end(), [&](const CandidateType& t) { return t.name == best.effect; });
-    bool other_kind = type.complete != nullptr;
-    for (const EffectSpec& e : best.model.effects) {
-      other_kind = other_kind || info_of(e)->systematic != best.systematic;
-    }
-    if (other_kind) best.model = refit(suite, best.model, progress, path, cache);
-    if (reported_by_names(type)) {
-      for (std::size_t i = 0; i < type.fitted.size(); ++i) {
-        best.values[i] = fitted_value(best.model, type.fitted[i]);
-      }
-    } else {
-      // completed ones stay, fitted ones refitted
-      best.values = find_spec(best.model.effects, type.effect)->values;
-    }
-  }
+  rank_candidates(d, types);
+  if (!d.candidates.empty() && d.candidates.front().significant) adopt_best(d, types, round);
   if (progress) progress->fits_done = progress->fits_total.load();
-  d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, alpha,
-                                       cache.at(d.candidates[*d.best].model)))
-                   : d.before;
-  d.explained = d.after.verdict == "consistent";
-  d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
-  if (!d.explained) {
-    const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
-    d.residuals = residual_alignment(suite, final_model, cache.at(final_model));
-  }
+  explain_outcome(d, suite, model, cache);
   return d;
 }
 

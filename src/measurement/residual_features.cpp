@@ -184,6 +184,121 @@ SuiteModel nudged(const SuiteModel& model, const std::string& effect) {
   return m;
 }
 
+using Residuals = std::vector<std::vector<RunResidual>>;
+
+/// The rotation from the world frame into a run's odometry end frame (along-track,
+/// cross-track, heading) at end heading `heading` [rad].
+Matrix3 end_frame(double heading) {
+  Matrix3 R = Matrix3::Identity();
+  R.topLeftCorner<2, 2>() << std::cos(heading), std::sin(heading), -std::sin(heading), std::cos(heading);
+  return R;
+}
+
+/// Adds a run's path features, each divided by the experiment's run count `n`, to `sum`.
+void add_features(PathFeatures& sum, const PathFeatures& f, double n) {
+  sum.distance_m += f.distance_m / n;
+  sum.angle_turned_rad += f.angle_turned_rad / n;
+  sum.turn_direction += f.turn_direction / n;
+  sum.spin_fraction += f.spin_fraction / n;
+  sum.travel_direction += f.travel_direction / n;
+  sum.reversals += f.reversals / n;
+  sum.speed_mps += f.speed_mps / n;
+}
+
+/// Experiment e's mean residual, its sensitivities to the factor directions (from the nudged
+/// models' residuals `nudges`) and its covariance, all in the runs' end frames, with its mean
+/// features and group. False when the covariance is not positive definite (no test can use
+/// the experiment).
+bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& residuals,
+                     const std::vector<Residuals>& nudges, double B, ExperimentMean& m) {
+  const double n = static_cast<double>(ex.runs.size());
+  Matrix3 C = Matrix3::Zero();
+  PathFeatures sum;
+  for (std::size_t r = 0; r < ex.runs.size(); ++r) {
+    const Matrix3 R = end_frame(odometry_end_pose(ex, ex.runs[r], B).z());
+    const RunResidual& res = residuals[e][r];
+    m.r += R * (res.error - res.mean) / n;
+    for (int j = 0; j < kDim; ++j) {
+      m.S.col(j) += R * (nudges[static_cast<std::size_t>(j)][e][r].mean - res.mean) / (kSensitivityStep * n);
+    }
+    C += R * res.cov * R.transpose() / (n * n);
+    add_features(sum, path_features(ex, ex.runs[r], B), n);
+  }
+  const Eigen::LDLT<Matrix3> ldlt(C);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
+  m.W = ldlt.solve(Matrix3::Identity());
+  m.features = sum;
+  m.group = experiment_group(ex);
+  return true;
+}
+
+/// The means of every experiment with runs and a usable covariance.
+std::vector<ExperimentMean> experiment_means(const Suite& suite, const SuiteModel& model,
+                                             const Residuals& residuals) {
+  const double B = model.robot.wheelbase_m;
+  // First-order sensitivity of every run's predicted mean to each factor direction.
+  std::vector<Residuals> nudges;
+  for (const char* effect : kDirections) nudges.push_back(odomcov::residuals(suite, nudged(model, effect)));
+  std::vector<ExperimentMean> ms;
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+    const SuiteExperiment& ex = suite.experiments[e];
+    if (ex.runs.empty()) continue;
+    ExperimentMean m;
+    if (experiment_mean(ex, e, residuals, nudges, B, m)) ms.push_back(std::move(m));
+  }
+  return ms;
+}
+
+/// H1 of a path feature: the base design X0 plus the same terms modulated by the feature,
+/// centred and scaled (the fit does not depend on it, its conditioning does); F test against
+/// X0, untestable when the feature does not vary across the experiments.
+void feature_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
+                  const std::string& name, ResidualAlignment& a) {
+  double mean = 0, spread = 0;
+  for (const ExperimentMean& m : ms) mean += feature_value(m.features, name) / static_cast<double>(ms.size());
+  for (const ExperimentMean& m : ms) spread = std::max(spread, std::abs(feature_value(m.features, name) - mean));
+  if (!(spread > 1e-9 * std::max(1.0, std::abs(mean)))) return;
+  std::vector<Eigen::MatrixXd> X1;
+  for (std::size_t e = 0; e < ms.size(); ++e) {
+    const double f = (feature_value(ms[e].features, name) - mean) / spread;
+    Eigen::MatrixXd x(kDim, 4 * kDim);
+    x << X0[e], f * X0[e];
+    X1.push_back(x);
+  }
+  f_test(ms, X0, X1, a);
+}
+
+/// One-way ANOVA of the groups: the base terms per group against common ones; untestable with
+/// fewer than two groups.
+void group_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
+                ResidualAlignment& a) {
+  std::map<std::string, int> index;
+  for (const ExperimentMean& m : ms) index.emplace(m.group, static_cast<int>(index.size()));
+  const auto groups = static_cast<Eigen::Index>(index.size());
+  if (groups < 2) return;
+  std::vector<Eigen::MatrixXd> X1;
+  for (std::size_t e = 0; e < ms.size(); ++e) {
+    Eigen::MatrixXd x = Eigen::MatrixXd::Zero(kDim, 2 * kDim * groups);
+    x.middleCols(2 * kDim * index.at(ms[e].group), 2 * kDim) = X0[e];
+    X1.push_back(x);
+  }
+  f_test(ms, X0, X1, a);
+}
+
+/// Family-wise p-values (Bonferroni over the testable features), then testable features
+/// first, each by raw p-value.
+void adjust_and_rank(std::vector<ResidualAlignment>& out) {
+  int tests = 0;
+  for (const ResidualAlignment& a : out) tests += a.testable ? 1 : 0;
+  for (ResidualAlignment& a : out) {
+    a.p_value = a.testable ? std::min(1.0, a.p_value_raw * tests) : 1.0;
+  }
+  std::stable_sort(out.begin(), out.end(), [](const ResidualAlignment& x, const ResidualAlignment& y) {
+    if (x.testable != y.testable) return x.testable;
+    return x.p_value_raw < y.p_value_raw;
+  });
+}
+
 }  // namespace
 
 PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m) {
@@ -212,46 +327,7 @@ const std::vector<std::string>& residual_feature_names() {
 std::vector<ResidualAlignment> residual_alignment(
     const Suite& suite, const SuiteModel& model,
     const std::vector<std::vector<RunResidual>>& residuals) {
-  const double B = model.robot.wheelbase_m;
-  // First-order sensitivity of every run's predicted mean to each factor direction.
-  std::vector<std::vector<std::vector<RunResidual>>> nudges;
-  for (const char* effect : kDirections) nudges.push_back(odomcov::residuals(suite, nudged(model, effect)));
-  std::vector<ExperimentMean> ms;
-  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
-    const SuiteExperiment& ex = suite.experiments[e];
-    if (ex.runs.empty()) continue;
-    const double n = static_cast<double>(ex.runs.size());
-    ExperimentMean m;
-    Matrix3 C = Matrix3::Zero();
-    PathFeatures sum;
-    for (std::size_t r = 0; r < ex.runs.size(); ++r) {
-      // Into the run's odometry end frame: along-track, cross-track, heading.
-      const double heading = odometry_end_pose(ex, ex.runs[r], B).z();
-      Matrix3 R = Matrix3::Identity();
-      R.topLeftCorner<2, 2>() << std::cos(heading), std::sin(heading), -std::sin(heading), std::cos(heading);
-      const RunResidual& res = residuals[e][r];
-      m.r += R * (res.error - res.mean) / n;
-      for (int j = 0; j < kDim; ++j) {
-        m.S.col(j) += R * (nudges[static_cast<std::size_t>(j)][e][r].mean - res.mean) / (kSensitivityStep * n);
-      }
-      C += R * res.cov * R.transpose() / (n * n);
-      const PathFeatures f = path_features(ex, ex.runs[r], B);
-      sum.distance_m += f.distance_m / n;
-      sum.angle_turned_rad += f.angle_turned_rad / n;
-      sum.turn_direction += f.turn_direction / n;
-      sum.spin_fraction += f.spin_fraction / n;
-      sum.travel_direction += f.travel_direction / n;
-      sum.reversals += f.reversals / n;
-      sum.speed_mps += f.speed_mps / n;
-    }
-    const Eigen::LDLT<Matrix3> ldlt(C);
-    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) continue;
-    m.W = ldlt.solve(Matrix3::Identity());
-    m.features = sum;
-    m.group = experiment_group(ex);
-    ms.push_back(std::move(m));
-  }
-
+  const std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals);
   // H0: the misfit is a constant offset in the end frame plus constant factor errors,
   // r_e = [I3 S_e] c. H1 adds the same terms modulated by the feature, f_e [I3 S_e] d: a
   // scale, wheelbase or diameter ratio (or an offset) that varies with the feature.
@@ -267,46 +343,13 @@ std::vector<ResidualAlignment> residual_alignment(
     a.feature = name;
     a.description = description(name);
     if (!ms.empty() && name != "group") {
-      // The feature centred and scaled (the fit does not depend on it, its conditioning does).
-      double mean = 0, spread = 0;
-      for (const ExperimentMean& m : ms) mean += feature_value(m.features, name) / static_cast<double>(ms.size());
-      for (const ExperimentMean& m : ms) spread = std::max(spread, std::abs(feature_value(m.features, name) - mean));
-      if (spread > 1e-9 * std::max(1.0, std::abs(mean))) {
-        std::vector<Eigen::MatrixXd> X1;
-        for (std::size_t e = 0; e < ms.size(); ++e) {
-          const double f = (feature_value(ms[e].features, name) - mean) / spread;
-          Eigen::MatrixXd x(kDim, 4 * kDim);
-          x << X0[e], f * X0[e];
-          X1.push_back(x);
-        }
-        f_test(ms, X0, X1, a);
-      }
+      feature_test(ms, X0, name, a);
     } else if (!ms.empty()) {
-      // One-way ANOVA: the constant terms per group against common ones.
-      std::map<std::string, int> index;
-      for (const ExperimentMean& m : ms) index.emplace(m.group, static_cast<int>(index.size()));
-      const auto groups = static_cast<Eigen::Index>(index.size());
-      if (groups >= 2) {
-        std::vector<Eigen::MatrixXd> X1;
-        for (std::size_t e = 0; e < ms.size(); ++e) {
-          Eigen::MatrixXd x = Eigen::MatrixXd::Zero(kDim, 2 * kDim * groups);
-          x.middleCols(2 * kDim * index.at(ms[e].group), 2 * kDim) = X0[e];
-          X1.push_back(x);
-        }
-        f_test(ms, X0, X1, a);
-      }
+      group_test(ms, X0, a);
     }
     out.push_back(std::move(a));
   }
-  int tests = 0;
-  for (const ResidualAlignment& a : out) tests += a.testable ? 1 : 0;
-  for (ResidualAlignment& a : out) {
-    a.p_value = a.testable ? std::min(1.0, a.p_value_raw * tests) : 1.0;
-  }
-  std::stable_sort(out.begin(), out.end(), [](const ResidualAlignment& x, const ResidualAlignment& y) {
-    if (x.testable != y.testable) return x.testable;
-    return x.p_value_raw < y.p_value_raw;
-  });
+  adjust_and_rank(out);
   return out;
 }
 
