@@ -58,8 +58,13 @@ struct Leg {
   double sigma_right = 0.0;  // kR sqrt|R|
   double inv_two_b = 0.0;
   double wheelbase_true = 0.0;
+  /// Lateral slip per sample [m] (effects' Systematic::lateral x (|L| + |R|)/2): the sample
+  /// moves by (ds + i lateral_m) sinc(h) at the chord's heading theta + h. Only the scalar step
+  /// takes it; a path with any slip runs the general kernel (Impl::group).
+  double lateral_m = 0.0;
   bool series_sinc = true;  // most lanes have |h| <= kSincSeriesMax
   effects::Motion motion;   // of the leg's first sample
+  effects::Systematic sys;  // the terms the leg was built with (per-run effects' left out)
 };
 
 template <class V>
@@ -96,7 +101,8 @@ inline __attribute__((always_inline)) void advance(State<V>& p, V ds, V ch, V sh
   p.theta += h + h;
 }
 
-/// Scalar step: the reference, also used for vector lanes outside the series bounds.
+/// Scalar step: the reference, also used for vector lanes outside the series bounds (whose legs
+/// have no lateral slip).
 inline void step(State<double>& p, const Leg& leg, double noise_l, double noise_r) {
   const double eps = (noise_r - noise_l) * leg.inv_two_b;
   const double ds = leg.center_m + 0.5 * (noise_l + noise_r);
@@ -113,6 +119,13 @@ inline void step(State<double>& p, const Leg& leg, double noise_l, double noise_
   const double sh = leg.sin_half * ce + leg.cos_half * se;
   const double h = leg.half_rad + eps;
   const double sinc = std::abs(h) <= kSincSeriesMax ? sinc_series(h * h) : sh / h;
+  if (leg.lateral_m != 0.0) {
+    // The lateral slip, spread along the arc as the travel is: lateral_m sinc(h) to the left of
+    // the chord's heading, (p.c, p.s) rotated by h (effects' Systematic, "lateral").
+    const double side = leg.lateral_m * sinc;
+    p.x -= side * (p.s * ch + p.c * sh);
+    p.y += side * (p.c * ch - p.s * sh);
+  }
   advance(p, ds, ch, sh, sinc, h);
 }
 
@@ -221,8 +234,12 @@ struct Simulator::Impl {
   std::vector<Leg> legs;           // the true motion: systematic effects folded in
   std::vector<std::unique_ptr<effects::Effect>> effects;
   std::vector<std::uint32_t> random_effects;  // indices of the effects with per-run/sample hooks
+  /// Positions in random_effects of the effects whose systematic terms depend on the run's
+  /// draws (Effect::per_run_systematic): left out of `legs`, composed per leg and run.
+  std::vector<std::uint32_t> per_run_terms;
   std::vector<const effects::Effect*> measuring;  // effects with a measurement hook
   std::int64_t samples = 0;
+  bool lateral = false;  // some leg slips sideways
   Vector3 odometry_pose = Vector3::Zero();
 
   static Leg make_leg(std::int64_t count, const ArcSegment& increment, const effects::Motion& motion,
@@ -231,16 +248,19 @@ struct Simulator::Impl {
     leg.count = count;
     leg.encoder = increment;
     leg.motion = motion;
+    leg.sys = sys;
     leg.travel = sys.travel(increment.left_m, increment.right_m);
     leg.wheelbase_true = sys.wheelbase_factor * robot.wheelbase_m;
     leg.center_m = leg.travel.center_m();
     leg.half_rad = 0.5 * leg.travel.heading_change_rad(leg.wheelbase_true);
     leg.cos_half = std::cos(leg.half_rad);
     leg.sin_half = std::sin(leg.half_rad);
-    const Eigen::Vector2d variance = wheel_variances(increment, robot.noise);
+    // the white noise variance k^2 |increment| times the effects' noise factor
+    const Eigen::Vector2d variance = wheel_variances(increment, robot.noise) * sys.noise_factor;
     leg.sigma_left = std::sqrt(variance.x());
     leg.sigma_right = std::sqrt(variance.y());
     leg.inv_two_b = 1.0 / (2.0 * leg.wheelbase_true);
+    leg.lateral_m = sys.lateral * 0.5 * (std::abs(increment.left_m) + std::abs(increment.right_m));
     leg.series_sinc = std::abs(leg.half_rad) <= kSincSeriesMax;
     return leg;
   }
@@ -248,18 +268,28 @@ struct Simulator::Impl {
   /// The legs of the true motion: each sample's systematic factors from its Motion, once per
   /// leg of equal samples when no effect depends on the history, else sample by sample with
   /// equal neighbours merged (a leg of a planned path then splits only where the factors
-  /// change, e.g. while backlash is taken up). Built once per path, never per run.
+  /// change, e.g. while backlash is taken up). Effects whose terms depend on the run's draws
+  /// are left out here (run_leg composes them); when one of them depends on the history, no
+  /// two samples merge (their terms may differ in another run). Built once per path, never per
+  /// run. `heading0_rad` starts the motion's absolute heading.
   static std::vector<Leg> make_legs(const std::vector<SampleRun>& schedule, const Robot& robot,
-                                    const std::vector<std::unique_ptr<effects::Effect>>& list) {
+                                    const std::vector<std::unique_ptr<effects::Effect>>& list,
+                                    double heading0_rad) {
     effects::Dependence dependence = effects::Dependence::none;
-    for (const auto& e : list) dependence = std::max(dependence, e->dependence());
+    bool merge = true;
+    for (const auto& e : list) {
+      dependence = std::max(dependence, e->dependence());
+      merge = merge && !(e->per_run_systematic() && e->dependence() == effects::Dependence::history);
+    }
     const bool per_sample = dependence == effects::Dependence::history;
     auto factors = [&](const effects::Motion& m) {
       effects::Systematic sys;
-      for (const auto& e : list) e->systematic(m, sys);
+      for (const auto& e : list) {
+        if (!e->per_run_systematic()) e->systematic(m, sys);
+      }
       return sys;
     };
-    effects::MotionTracker tracker(robot.wheelbase_m);
+    effects::MotionTracker tracker(robot.wheelbase_m, heading0_rad);
     std::vector<Leg> out;
     effects::Systematic last;
     for (const SampleRun& run : schedule) {
@@ -272,7 +302,7 @@ struct Simulator::Impl {
       for (std::int64_t i = 0; i < run.count; ++i) {
         const effects::Motion m = tracker.next(inc.left_m, inc.right_m, run.duration_s);
         const effects::Systematic sys = factors(m);
-        if (i > 0 && sys == last) {
+        if (merge && i > 0 && sys == last) {
           ++out.back().count;
         } else {
           out.push_back(make_leg(1, inc, m, sys, robot));
@@ -283,17 +313,32 @@ struct Simulator::Impl {
     return out;
   }
 
-  Impl(const Robot& r, const std::vector<SampleRun>& schedule, const EffectList& effect_list)
+  /// A leg as this run sees it: the leg's own terms composed with those of the effects whose
+  /// terms depend on the run's draws (`states` from their begin_run).
+  Leg run_leg(const Leg& leg, const std::array<effects::RunState, kMaxEffects>& states) const {
+    effects::Systematic sys = leg.sys;
+    for (const std::uint32_t r : per_run_terms) {
+      effects[random_effects[r]]->run_systematic(leg.motion, states[r], sys);
+    }
+    return make_leg(leg.count, leg.encoder, leg.motion, sys, robot);
+  }
+
+  Impl(const Robot& r, const std::vector<SampleRun>& schedule, const EffectList& effect_list,
+       double heading0_rad)
       : robot(r), effects(effects::instantiate(effect_list)) {
     for (std::size_t e = 0; e < effects.size(); ++e) {
-      if (effects[e]->stochastic()) random_effects.push_back(static_cast<std::uint32_t>(e));
+      if (effects[e]->stochastic()) {
+        if (effects[e]->per_run_systematic()) per_run_terms.push_back(static_cast<std::uint32_t>(random_effects.size()));
+        random_effects.push_back(static_cast<std::uint32_t>(e));
+      }
       if (effects[e]->measures()) measuring.push_back(effects[e].get());
     }
-    legs = make_legs(schedule, robot, effects);
+    legs = make_legs(schedule, robot, effects, heading0_rad);
     double max_travel = 0.0;
     for (const Leg& leg : legs) {
       samples += leg.count;
       max_travel = std::max(max_travel, 0.5 * (std::abs(leg.encoder.left_m) + std::abs(leg.encoder.right_m)));
+      lateral = lateral || leg.lateral_m != 0.0;
     }
     for (std::size_t e = 0; e < effects.size(); ++e) {
       if (const std::string why = effects[e]->check_samples(max_travel); !why.empty()) {
@@ -304,7 +349,7 @@ struct Simulator::Impl {
     // no effects and k = 0 the error is exactly zero.
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
     std::uint32_t n = 0;
-    for (const Leg& leg : make_legs(schedule, robot, {})) {
+    for (const Leg& leg : make_legs(schedule, robot, {}, 0.0)) {
       for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
         step(p, leg, 0.0, 0.0);
         if ((n & kRenormMask) == kRenormMask) renormalise(p);
@@ -321,9 +366,11 @@ struct Simulator::Impl {
     return pose_error(pose, odometry_pose);
   }
 
-  /// The scalar kernel: the reference for the vectorised one and, with stochastic effects,
-  /// the general kernel. The stochastic effects see each sample after the wheel normals are
-  /// drawn; each draws from its own slot, its index in the effect list.
+  /// The scalar kernel: the reference for the vectorised one and, with stochastic effects or a
+  /// lateral slip, the general kernel. The stochastic effects see each sample after the wheel
+  /// normals are drawn; each draws from its own slot, its index in the effect list. Effects whose
+  /// systematic terms depend on the run's draws rebuild each leg for the run (run_leg: one sin
+  /// and cos per leg and run, nothing allocated).
   Vector3 scalar_run(const random::Philox::key_type& key, std::uint64_t run) const {
     State<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
     const bool stochastic = !random_effects.empty();
@@ -335,7 +382,10 @@ struct Simulator::Impl {
       effects[random_effects[i]]->begin_run(states[i], draws[i]);
     }
     std::uint32_t n = 0;
-    for (const Leg& leg : legs) {
+    Leg this_run;  // a leg rebuilt for this run's draws
+    for (const Leg& path_leg : legs) {
+      if (!per_run_terms.empty()) this_run = run_leg(path_leg, states);
+      const Leg& leg = per_run_terms.empty() ? path_leg : this_run;
       for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
         const random::Bits128 b = random::draw(key, run, n, random::kTagWheelNoise);
         double zl = random::normal(b.lo, key, run, n, random::kTagWheelRetry + 0);
@@ -367,9 +417,10 @@ struct Simulator::Impl {
     return error_of(p.x, p.y, p.theta);
   }
 
-  /// Runs first .. first+kLanes-1: vectorised, or the general kernel run by run.
+  /// Runs first .. first+kLanes-1: vectorised, or the general kernel run by run (stochastic
+  /// effects, or a lateral slip, which the vector kernel does not take).
   void group(const random::Philox::key_type& key, std::uint64_t first, Vector3* out) const {
-    if (random_effects.empty()) return vector_group(key, first, out);
+    if (random_effects.empty() && !lateral) return vector_group(key, first, out);
     for (int j = 0; j < kLanes; ++j) out[j] = scalar_run(key, first + static_cast<std::uint64_t>(j));
   }
 
@@ -439,8 +490,8 @@ Simulator::Impl::vector_group(const random::Philox::key_type& key, std::uint64_t
   for (int j = 0; j < kLanes; ++j) out[j] = error_of(p.x[j], p.y[j], p.theta[j]);
 }
 
-Simulator::Simulator(const Robot& robot, const Path& path, const EffectList& effects)
-    : impl_(std::make_unique<Impl>(robot, sample_schedule(path), effects)) {}
+Simulator::Simulator(const Robot& robot, const Path& path, const EffectList& effects, double heading0_rad)
+    : impl_(std::make_unique<Impl>(robot, sample_schedule(path), effects, heading0_rad)) {}
 
 namespace {
 
@@ -463,8 +514,9 @@ std::vector<SampleRun> piece_schedule(const std::vector<ArcSegment>& pieces,
 }  // namespace
 
 Simulator::Simulator(const Robot& robot, const std::vector<ArcSegment>& pieces,
-                     const std::vector<double>& durations_s, const EffectList& effects)
-    : impl_(std::make_unique<Impl>(robot, piece_schedule(pieces, durations_s), effects)) {}
+                     const std::vector<double>& durations_s, const EffectList& effects,
+                     double heading0_rad)
+    : impl_(std::make_unique<Impl>(robot, piece_schedule(pieces, durations_s), effects, heading0_rad)) {}
 Simulator::~Simulator() = default;
 Simulator::Simulator(Simulator&&) noexcept = default;
 Simulator& Simulator::operator=(Simulator&&) noexcept = default;

@@ -380,6 +380,9 @@ class Surrogate {
     pairs_.push_back(std::move(p));
   }
 
+  /// The values the surrogate is anchored at.
+  const std::vector<double>& anchor() const { return v0_; }
+
   /// Each run's term of the log-likelihood at the values v.
   std::vector<double> terms(const std::vector<double>& v, Likelihood kind) const {
     std::vector<double> delta(v.size());
@@ -444,12 +447,21 @@ std::pair<double, double> axis_offsets(const Handle& h, double v) {
   return {-step, -2 * step};
 }
 
+/// A re-anchor may take the previous anchor's curvatures when no parameter moved more than this
+/// many of its difference steps: the curvature's change (third derivative times the distance)
+/// then stays small. Farther (a candidate that lands far from where it started, e.g. from its
+/// neutral value), the curvatures are taken afresh.
+constexpr double kCurvatureReuseSteps = 8.0;
+
 /// The surrogate at the values v (model holds them): the anchor, two points per parameter and
 /// one per pair, all from the cache.
 Surrogate anchor_at(const SuiteModel& model, const std::vector<Handle>& handles,
                     const std::vector<double>& v, ResidualCache& cache,
                     std::atomic<std::int64_t>* counter, const Surrogate* near = nullptr) {
   Surrogate s(cache.at(model, counter), v);
+  for (std::size_t k = 0; near && k < handles.size(); ++k) {
+    if (std::abs(v[k] - near->anchor()[k]) > kCurvatureReuseSteps * handles[k].fd_step(v[k])) near = nullptr;
+  }
   if (near) {  // a re-anchor: one point per parameter, curvatures from the previous anchor
     for (std::size_t k = 0; k < handles.size(); ++k) {
       const double o = axis_offsets(handles[k], v[k]).second > 0 ? handles[k].fd_step(v[k]) : -handles[k].fd_step(v[k]);

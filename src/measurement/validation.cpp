@@ -18,7 +18,7 @@ OrderResult order2_result(const Config& config, const SampleMoments& sim, double
   r.order = 2;
   std::vector<double> durations;
   const std::vector<ArcSegment> pieces =
-      model_pieces(config.path, config.robot.wheelbase_m, &durations);
+      path_model_pieces(config.path, config.robot.wheelbase_m, config.model_effects, &durations);
   const std::size_t count = second_order_piece_count(pieces, config.robot.wheelbase_m);
   if (count > kMaxSecondOrderPieces) {  // quadratic cost: not computed, never "consistent"
     const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -66,7 +66,7 @@ Validation validate(const Config& config, double alpha, int threads, Progress* p
   } else {
     std::vector<double> durations;
     const std::vector<ArcSegment> pieces =
-        model_pieces(config.path, config.robot.wheelbase_m, &durations);
+        path_model_pieces(config.path, config.robot.wheelbase_m, config.model_effects, &durations);
     const Prediction p = predict(pieces, durations, config.robot, config.model_effects);
     v.theory_mean = p.mean;
     v.theory_cov = p.cov;

@@ -30,13 +30,17 @@ class Simulator {
  public:
   /// `robot`: nominal wheelbase (the odometry's) with the world's wheel noise constants;
   /// `effects`: the world's effects. Systematic effects are folded into the path; stochastic
-  /// ones (noise correlation, slip, per-run radius, bumps) run in a general scalar kernel.
-  Simulator(const Robot& robot, const Path& path, const EffectList& effects = {});
+  /// ones (noise correlation, slip, per-run radius, bumps, custom effects' random parameters)
+  /// and lateral slips run in a general scalar kernel. `heading0_rad`: the run's start heading
+  /// in the reference's frame (effects' `heading`; every run of this simulator starts there).
+  Simulator(const Robot& robot, const Path& path, const EffectList& effects = {},
+            double heading0_rad = 0.0);
   /// A logged run (SuiteRun::pieces): one sample per encoder piece, of the piece's duration
   /// (`durations_s` empty: unknown, so speed- and time-dependent effects see NaN), so the
   /// simulated run steps exactly as the model's prediction of that run resolves it.
   Simulator(const Robot& robot, const std::vector<ArcSegment>& pieces,
-            const std::vector<double>& durations_s, const EffectList& effects = {});
+            const std::vector<double>& durations_s, const EffectList& effects = {},
+            double heading0_rad = 0.0);
   ~Simulator();
   Simulator(Simulator&&) noexcept;
   Simulator& operator=(Simulator&&) noexcept;
