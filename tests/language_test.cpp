@@ -177,6 +177,44 @@ TEST(LanguageAgreement, HeadingFromTheRunsStart) {
   EXPECT_FALSE(tests_of(m, c, c.world.effects, 0.0).consistent(2)) << "the start heading makes no difference";
 }
 
+TEST(LanguageAgreement, NoiseFreeWorldIsTheModelsMean) {
+  // Without wheel noise the simulator's error is the systematic mean, which both model orders
+  // must give to within the bound of resolve's refinement: each piece's terms are within
+  // kRefineTolerance of their mean along it, so a scale or a slip moves the end by at most
+  // kRefineTolerance x S (S the path's mean wheel travel), and a wheelbase factor turns the
+  // heading by at most kRefineTolerance x Theta (Theta the total turn), which moves the end by
+  // at most that times S. Every expression here is strongly nonlinear in its variable, so the
+  // model's pieces must be cut finer than the path's.
+  const char* const effects[] = {
+      "    - custom: {name: warm_up, parameters: {c: 0.05, tau: 1.0}, scale: \"1 + c * exp(-t / tau)\"}\n",
+      "    - custom: {name: wobble, parameters: {d: 0.01}, lateral: \"d * sin(3 * theta)\"}\n",
+      "    - custom: {name: slope, parameters: {d: 0.01}, lateral: \"d * sin(heading)\", noise: \"1 + heading^2\"}\n",
+      "    - custom: {name: start, parameters: {c: 0.002}, scale_left: \"1 + c * abs(a)\", "
+      "scale_right: \"1 - c * a + c^2 * a^2\"}\n",
+      "    - custom: {name: wear, parameters: {c: 0.004}, wheelbase_factor: \"1 + c * s^2\"}\n",
+  };
+  int i = 0;
+  for (const char* e : effects) {
+    const Config c = config_from("noise_free_" + std::to_string(i++), config_text(kMixedPath, e, 0.0));
+    const Vector3 world = Simulator(c.world_robot(), c.path, c.world.effects, 0.7).reference_error(1, 0);
+    std::vector<double> durations;
+    const auto pieces = path_model_pieces(c.path, c.robot.wheelbase_m, c.world.effects, &durations);
+    const Vector3 order1 = predict(pieces, durations, c.robot, c.world.effects, 0.7).mean;
+    const Vector3 order2 = predict_second_order(pieces, durations, c.robot, c.world.effects, 0.7).mean;
+    double travel = 0.0, turn = 0.0;
+    for (const ArcSegment& p : pieces) {
+      travel += 0.5 * (std::abs(p.left_m) + std::abs(p.right_m));
+      turn += std::abs(p.heading_change_rad(c.robot.wheelbase_m));
+    }
+    const double bound = effects::kRefineTolerance * (travel + turn * travel);
+    std::printf("noise-free world %d: |mean| %.3g m, order 1 off by %.2g, order 2 by %.2g (bound %.2g)\n", i - 1,
+                world.head<2>().norm(), (order1 - world).norm(), (order2 - world).norm(), bound);
+    EXPECT_GT(world.head<2>().norm(), 1e-3) << e << ": the effect is too small to test";
+    EXPECT_LT((order1 - world).norm(), bound) << e << ": order 1 " << order1.transpose() << ", world " << world.transpose();
+    EXPECT_LT((order2 - world).norm(), bound) << e << ": order 2 " << order2.transpose() << ", world " << world.transpose();
+  }
+}
+
 // ---- Recovery: synthesised worlds, compare and fit ------------------------------------------
 
 Suite synth_suite(const std::string& world_file, const std::string& tag) {

@@ -207,6 +207,7 @@ class Custom final : public effects::Effect {
   // turn the same at the piece's true wheelbase.
   int run_constants() const override { return static_cast<int>(random_.size()); }
   void model(effects::PieceModel& piece) const override {
+    if (random_.empty()) return;
     const effects::Systematic others = effects::others_systematic(piece, this);
     const double b0 = piece.wheelbase_factor * piece.wheelbase_m;
     const std::lock_guard<std::mutex> lock(mutex_);

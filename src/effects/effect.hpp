@@ -249,9 +249,9 @@ class Effect {
 using odomcov::kMaxRunConstants;
 
 /// A piece as every propagator sees it once the effects have spoken: the true motion (systematic
-/// factors applied), the white noise intensity of (e_dtheta, e_d) over the piece, and the effect
-/// of each standard-normal per-run constant on (e_dtheta, e_d, e_lat). The first-order engine
-/// (predict) and any higher-order propagator consume these, so effects are modelled in one place.
+/// factors applied) and the white noise intensity of (e_dtheta, e_d) over the piece (the per-run
+/// constants' columns are the path's: ResolvedPath::columns). The first-order engine (predict)
+/// and any higher-order propagator consume these, so effects are modelled in one place.
 struct ResolvedPiece {
   /// Built from its encoder travel, the rest set by resolve (a user-provided constructor: the
   /// engine's emplace_back then does not zero the whole piece first).
@@ -263,9 +263,6 @@ struct ResolvedPiece {
   double angle_rad = 0.0;        // true heading change a
   double wheelbase_true_m = 0.0;
   Matrix2 intensity = Matrix2::Zero();  // cov of (e_dtheta, e_d) accumulated over the piece
-  // 3 x run_constants: per-run constants -> (e_dtheta, e_d, e_lat), each spread uniformly along
-  // the piece as the piece's own motion is
-  Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxRunConstants> input_columns;
 };
 
 /// The resolved path, plus what acts after the path: the measurement hooks (reference_offset).
@@ -276,8 +273,15 @@ struct ResolvedPiece {
 struct ResolvedPath {
   std::vector<ResolvedPiece> pieces;
   int run_constants = 0;
+  /// Piece after piece, the 3 x run_constants effect of each standard-normal per-run constant on
+  /// (e_dtheta, e_d, e_lat), spread uniformly along the piece as its own motion is (column-major;
+  /// empty without per-run constants, so that a piece stays small on the common path).
+  std::vector<double> input_columns;
   std::vector<std::shared_ptr<const Effect>> measurement_effects;
 
+  Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic>> columns(std::size_t piece) const {
+    return {input_columns.data() + 3 * static_cast<std::size_t>(run_constants) * piece, 3, run_constants};
+  }
   void measure(Vector3& pose, Matrix3& P_world) const;
 };
 

@@ -148,6 +148,12 @@ template <class Each>
 void for_each_piece(const std::vector<ArcSegment>& encoder_pieces,
                     const std::vector<double>& durations_s, double wheelbase_m, double heading0_rad,
                     const std::vector<std::unique_ptr<Effect>>& active, Each&& each) {
+  if (active.empty()) {  // the common plain model: no motion, no terms, no cuts
+    const Motion none;
+    const Systematic identity;
+    for (const ArcSegment& piece : encoder_pieces) each(piece, none, identity);
+    return;
+  }
   PieceWalker<std::remove_reference_t<Each>> walker(wheelbase_m, heading0_rad, active, each);
   for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
     walker.piece(encoder_pieces[i], durations_s.empty() ? std::nan("") : durations_s[i]);
@@ -176,6 +182,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
   }
   const double B = robot.wheelbase_m;
   out.pieces.reserve(encoder_pieces.size());
+  out.input_columns.reserve(3 * static_cast<std::size_t>(out.run_constants) * encoder_pieces.size());
   // One PieceModel serves every piece: its run columns keep their storage, so the loop does
   // not allocate.
   PieceModel m;
@@ -186,7 +193,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
   for_each_piece(encoder_pieces, durations_s, B, heading0_rad, active,
                  [&](const ArcSegment& encoder, const Motion& motion, const Systematic& sys) {
     m.encoder = encoder;
-    m.motion = motion;
+    if (!active.empty()) m.motion = motion;  // only the effects read it
     m.scale_left = sys.scale_left;
     m.scale_right = sys.scale_right;
     m.wheelbase_factor = sys.wheelbase_factor;
@@ -200,7 +207,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
     const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
     r.wheelbase_true_m = m.wheelbase_factor * B;
     r.center_m = travel.center_m();
-    r.lateral_m = sys.lateral * 0.5 * (std::abs(encoder.left_m) + std::abs(encoder.right_m));
+    if (sys.lateral != 0.0) r.lateral_m = sys.lateral * 0.5 * (std::abs(encoder.left_m) + std::abs(encoder.right_m));
     r.angle_rad = travel.heading_change_rad(r.wheelbase_true_m);
     if (r.wheelbase_true_m != inverse_for) {  // 1/b changes only with the wheelbase factor
       inverse_for = r.wheelbase_true_m;
@@ -213,10 +220,9 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
     r.intensity(0, 0) = (w11 - 2.0 * w12 + w22) * inverse * inverse + m.heading_var;
     r.intensity(0, 1) = r.intensity(1, 0) = 0.5 * (w22 - w11) * inverse;
     r.intensity(1, 1) = 0.25 * (w11 + 2.0 * w12 + w22);
-    r.input_columns.resize(3, out.run_constants);
     for (int c = 0; c < out.run_constants; ++c) {
       const Eigen::Vector3d& w = m.run_columns.at(static_cast<std::size_t>(c));
-      r.input_columns.col(c) << (w.y() - w.x()) * inverse, 0.5 * (w.x() + w.y()), w.z();
+      out.input_columns.insert(out.input_columns.end(), {(w.y() - w.x()) * inverse, 0.5 * (w.x() + w.y()), w.z()});
     }
   });
   out.measurement_effects = measurement_effects(active);
@@ -239,8 +245,11 @@ class PoseWalker {
   Complex rotation() const { return rotation_; }
   /// Composes the piece of centre travel d and lateral slip l whose angle functions are f.
   void step(double d, const detail::ArcStep& f, double l = 0.0) {
-    const double x = l == 0.0 ? f.chord_x(d) : f.chord_x(d, l);
-    const double y = l == 0.0 ? f.chord_y(d) : f.chord_y(d, l);
+    double x = f.chord_x(d), y = f.chord_y(d);
+    if (l != 0.0) {  // (d + i l) U(a): ArcStep::chord_x(d, l), chord_y(d, l)
+      x -= f.chord_y(l);
+      y += f.chord_x(l);
+    }
     const double c = rotation_.real(), s = rotation_.imag();
     pose_ = {pose_.x() + c * x - s * y, pose_.y() + s * x + c * y, pose_.z() + f.angle};
     if (++count_ == kExactEvery) {
@@ -301,20 +310,22 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
       Eigen::MatrixXd::Zero(3, constants);
   PoseWalker true_pose, odometry;
   Complex noise_mean = 0.0;
-  for (const effects::ResolvedPiece& r : path.pieces) {
+  for (std::size_t k = 0; k < path.pieces.size(); ++k) {
+    const effects::ResolvedPiece& r = path.pieces[k];
     const double d = r.center_m;
     const double l = r.lateral_m;
     const double a = r.angle_rad;
     // One evaluation of the angle's functions serves every kernel below.
     const detail::ArcFunctions f(a);
-    const Matrix3 q = detail::arc_noise_covariance(d, l, f, r.intensity);
+    const Matrix3 q = l == 0.0 ? detail::arc_noise_covariance(d, f, r.intensity)
+                               : detail::arc_noise_covariance(d, l, f, r.intensity);
     const double v0 = P(2, 2);
     if (constants == 0) {
       P = transition_congruence(f, d, l, P) + q;
     } else {
       const Matrix3 phi = detail::arc_transition(d, l, f);
       const Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, effects::kMaxRunConstants> A =
-          detail::arc_input_gain(d, l, f) * r.input_columns;
+          detail::arc_input_gain(d, l, f) * path.columns(k);
       const Matrix3 cross = phi * C * A.transpose();
       P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
       C = phi * C + A;

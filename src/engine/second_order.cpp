@@ -79,6 +79,8 @@
 #include "odomcov/engine/second_order.hpp"
 
 #include "odomcov/closed_form/limits.hpp"
+#include "odomcov/base/error.hpp"
+#include "odomcov/base/format.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -139,6 +141,9 @@ struct Model {
   std::vector<double> g_l;       // K x m
   double w_end = 0.0;            // W(T)
   bool lateral = false;          // some piece slips or some column moves the slip
+  Vector3 true_end_pose = Vector3::Zero();  // of the systematic path
+  Vector3 odometry_end_pose = Vector3::Zero();
+  double i_dd_total = 0.0;       // sum of the pieces' I_dd
 };
 
 double dot(const double* x, const double* y, int m) {
@@ -147,9 +152,10 @@ double dot(const double* x, const double* y, int m) {
   return s;
 }
 
-/// Fills `node` at fraction u of piece k; `g_buffer` receives g(t) (m entries).
-void make_node(const Model& model, std::size_t k, double u, double weight, double* g_buffer,
-               Node& node) {
+/// Fills `node` at fraction u of piece k; `g_buffer` receives g(t) (m entries). Inlined: it
+/// runs Q^2 times per piece in the diagonal blocks.
+inline __attribute__((always_inline)) void make_node(const Model& model, std::size_t k, double u,
+                                                     double weight, double* g_buffer, Node& node) {
   const Piece& p = model.pieces[k];
   const int m = model.m;
   const double* g0 = model.g_start.data() + k * static_cast<std::size_t>(m);
@@ -301,19 +307,27 @@ void add_separable_pairs_lateral(const std::vector<Node>& nodes, Complex& sum_co
 /// 4-point rule at ~1e-9 relative up to k ~ 0.3 m^1/2.
 constexpr double kSecondOrderMaxTravel = 1.0;  // m
 
+/// The mean wheel speed of piece i (NaN without durations).
+double speed_of(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s, std::size_t i) {
+  const double dt = durations_s.empty() ? std::nan("") : durations_s[i];
+  return 0.5 * (std::abs(pieces[i].left_m) + std::abs(pieces[i].right_m)) / dt;
+}
+
 std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
-                               const std::vector<double>& durations_s, double wheelbase_m, bool merge,
-                               std::vector<double>& refined_durations_s) {
+                               const std::vector<double>& durations_s, double wheelbase_m,
+                               bool acceleration, std::vector<double>& refined_durations_s) {
   // Durations (when given) follow the pieces: summed where pieces merge, split where they are cut.
-  // Pieces merge only at equal durations too, so a piece keeps its speed (a custom effect's v),
-  // and not at all when an effect uses the acceleration (`merge` false): a piece's acceleration
-  // is its speed against the previous piece's, which merging would spread.
+  // Pieces merge only at equal durations too, so a piece keeps its speed (a custom effect's v).
+  // When an effect uses the acceleration (a piece's speed against the previous piece's), a piece
+  // whose speed differs from its predecessor's takes no equal followers: merging would spread
+  // its acceleration over them (sample_model_pieces sets such pieces apart).
   const bool timed = !durations_s.empty();
   std::vector<ArcSegment> merged;
   std::vector<double> merged_durations;
   merged.reserve(pieces.size());
   for (std::size_t i = 0; i < pieces.size();) {
     std::size_t j = i + 1;
+    const bool merge = !acceleration || (i > 0 && speed_of(pieces, durations_s, i) == speed_of(pieces, durations_s, i - 1));
     while (merge && j < pieces.size() && pieces[j].left_m == pieces[i].left_m &&
            pieces[j].right_m == pieces[i].right_m && (!timed || durations_s[j] == durations_s[i])) {
       ++j;
@@ -345,9 +359,9 @@ std::vector<ArcSegment> refine(const std::vector<ArcSegment>& pieces,
 }
 
 /// The integrals' model of the resolved pieces: the systematic path's pieces, the white
-/// variance accumulated along them, and the per-run constants' columns (g at each piece start,
-/// G^theta, G^d and G^l per piece).
-Model build_model(const effects::ResolvedPath& resolved) {
+/// variance accumulated along them, the per-run constants' columns (g at each piece start,
+/// G^theta, G^d and G^l per piece), and the true and odometry end poses (nominal wheelbase B).
+Model build_model(const effects::ResolvedPath& resolved, double B) {
   const std::size_t K = resolved.pieces.size();
   Model model;
   model.m = resolved.run_constants;
@@ -372,24 +386,28 @@ Model build_model(const effects::ResolvedPath& resolved) {
     p.i_td = r.intensity(0, 1);
     p.i_dd = r.intensity(1, 1);
     model.lateral = model.lateral || p.l != 0.0;
+    const auto columns = resolved.columns(k);
     for (std::size_t i = 0; i < mm; ++i) {
       const Eigen::Index col = static_cast<Eigen::Index>(i);
-      model.g_theta[k * mm + i] = r.input_columns(0, col);
-      model.g_d[k * mm + i] = r.input_columns(1, col);
-      model.g_l[k * mm + i] = r.input_columns(2, col);
-      model.lateral = model.lateral || r.input_columns(2, col) != 0.0;
-      model.g_start[(k + 1) * mm + i] = model.g_start[k * mm + i] + r.input_columns(0, col);
+      model.g_theta[k * mm + i] = columns(0, col);
+      model.g_d[k * mm + i] = columns(1, col);
+      model.g_l[k * mm + i] = columns(2, col);
+      model.lateral = model.lateral || columns(2, col) != 0.0;
+      model.g_start[(k + 1) * mm + i] = model.g_start[k * mm + i] + columns(0, col);
     }
     w += p.i_tt;
+    model.i_dd_total += p.i_dd;
     true_pose = compose(true_pose, detail::arc_displacement(r.center_m, r.lateral_m, detail::ArcStep(r.angle_rad)));
+    model.odometry_end_pose = drive(model.odometry_end_pose, r.encoder, B);
   }
   model.w_end = w;
+  model.true_end_pose = true_pose;
   return model;
 }
 
 /// The single integrals at one node: the mean (2), Cov(p, phi(T)) (5) and the delta part of
 /// (4); `g_end` is g(T), `c_end` C(T, s) at the node.
-void add_single(const Model& model, const Node& x, const double* g_end, double c_end, double i_dd,
+inline __attribute__((always_inline)) void add_single(const Model& model, const Node& x, const double* g_end, double c_end, double i_dd,
                 Complex& noise_mean, Complex& cov_p_theta, Complex& diag_plain) {
   const int m = model.m;
   diag_plain += x.weight * x.A * x.A * (1.0 + series::expm1_small(-2.0 * x.V)) * i_dd;
@@ -448,8 +466,29 @@ void add_pairs(const Model& model, const std::vector<Node>& nodes, Complex& sum_
 
 std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
   std::vector<double> unused;
-  return refine(pieces, {}, wheelbase_m, true, unused).size();
+  return refine(pieces, {}, wheelbase_m, false, unused).size();
 }
+
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                                     double wheelbase_m, const EffectList& effects) {
+  std::vector<double> unused;
+  return refine(pieces, durations_s, wheelbase_m, effect_needs(effects).sample_pieces, unused).size();
+}
+
+namespace {
+
+/// Order 2's cost is quadratic in its pieces (with per-run constants; linear without, the pairs
+/// being separable): beyond kMaxSecondOrderPieces, or kMaxModelPieces when linear, it is bad
+/// input.
+void check_second_order_pieces(std::size_t pieces, const char* which, bool quadratic) {
+  const double limit = quadratic ? static_cast<double>(kMaxSecondOrderPieces) : kMaxModelPieces;
+  if (static_cast<double>(pieces) <= limit) return;
+  throw InputError("", 0, "order 2",
+                   std::to_string(pieces) + " " + which + " quadrature pieces, above the limit " +
+                       format_number(limit) + (quadratic ? " (its cost is quadratic)" : "") + "; use --order 1");
+}
+
+}  // namespace
 
 Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
                                 const std::vector<double>& durations_s, const Robot& robot,
@@ -457,24 +496,18 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
   const double B = robot.wheelbase_m;
   std::vector<double> refined_durations;
   const std::vector<ArcSegment> refined =
-      refine(encoder_pieces, durations_s, B, !effect_needs(effects).sample_pieces, refined_durations);
-  if (refined.size() > kMaxSecondOrderPieces) {
-    throw std::length_error("predict_second_order: " + std::to_string(refined.size()) +
-                            " quadrature pieces, above kMaxSecondOrderPieces (limits.hpp)");
-  }
+      refine(encoder_pieces, durations_s, B, effect_needs(effects).sample_pieces, refined_durations);
+  check_second_order_pieces(refined.size(), "planned", true);
   const effects::ResolvedPath resolved =
       effects::resolve(refined, refined_durations, robot, effects, heading0_rad);
+  // The effects may cut pieces further (a smooth history term, backlash taken up).
+  check_second_order_pieces(resolved.pieces.size(), "resolved", resolved.run_constants > 0);
   const std::size_t K = resolved.pieces.size();
-  const Model model = build_model(resolved);
+  const Model model = build_model(resolved, B);
   const int m = model.m;
   const std::size_t mm = static_cast<std::size_t>(m);
-  Vector3 true_pose = Vector3::Zero(), odometry = Vector3::Zero();
-  double i_dd_total = 0.0;
-  for (const effects::ResolvedPiece& r : resolved.pieces) {
-    true_pose = compose(true_pose, detail::arc_displacement(r.center_m, r.lateral_m, detail::ArcStep(r.angle_rad)));
-    odometry = drive(odometry, r.encoder, B);
-    i_dd_total += r.intensity(1, 1);
-  }
+  const Vector3& true_pose = model.true_end_pose;
+  const Vector3& odometry = model.odometry_end_pose;
   // data() + offset, not &v[i]: with no run constants (m = 0) the vectors are empty and v[0]
   // would bind a reference to null (UBSan, found by the fuzz targets).
   const double* g_end = model.g_start.data() + K * mm;
@@ -496,7 +529,7 @@ Prediction predict_second_order(const std::vector<ArcSegment>& encoder_pieces,
   }
   Complex sum_conj = 0.0, sum_plain = 0.0;
   (model.lateral ? add_pairs<true> : add_pairs<false>)(model, nodes, sum_conj, sum_plain);
-  const double cov_conj = 2.0 * sum_conj.real() + i_dd_total;
+  const double cov_conj = 2.0 * sum_conj.real() + model.i_dd_total;
   const Complex cov_plain = 2.0 * sum_plain + diag_plain;
 
   Prediction out;

@@ -380,9 +380,6 @@ class Surrogate {
     pairs_.push_back(std::move(p));
   }
 
-  /// The values the surrogate is anchored at.
-  const std::vector<double>& anchor() const { return v0_; }
-
   /// Each run's term of the log-likelihood at the values v.
   std::vector<double> terms(const std::vector<double>& v, Likelihood kind) const {
     std::vector<double> delta(v.size());
@@ -447,11 +444,11 @@ std::pair<double, double> axis_offsets(const Handle& h, double v) {
   return {-step, -2 * step};
 }
 
-/// A re-anchor may take the previous anchor's curvatures when no parameter moved more than this
-/// many of its difference steps: the curvature's change (third derivative times the distance)
-/// then stays small. Farther (a candidate that lands far from where it started, e.g. from its
-/// neutral value), the curvatures are taken afresh.
-constexpr double kCurvatureReuseSteps = 8.0;
+/// A re-anchor takes the previous anchor's curvatures only when that anchor's surrogate foretold
+/// the exact log-likelihood at the new one within this: else the model is not quadratic over
+/// the step (a candidate that lands far from its neutral start), and its curvatures are taken
+/// afresh.
+constexpr double kCurvatureTrust = 1.0;
 
 /// The surrogate at the values v (model holds them): the anchor, two points per parameter and
 /// one per pair, all from the cache.
@@ -459,9 +456,6 @@ Surrogate anchor_at(const SuiteModel& model, const std::vector<Handle>& handles,
                     const std::vector<double>& v, ResidualCache& cache,
                     std::atomic<std::int64_t>* counter, const Surrogate* near = nullptr) {
   Surrogate s(cache.at(model, counter), v);
-  for (std::size_t k = 0; near && k < handles.size(); ++k) {
-    if (std::abs(v[k] - near->anchor()[k]) > kCurvatureReuseSteps * handles[k].fd_step(v[k])) near = nullptr;
-  }
   if (near) {  // a re-anchor: one point per parameter, curvatures from the previous anchor
     for (std::size_t k = 0; k < handles.size(); ++k) {
       const double o = axis_offsets(handles[k], v[k]).second > 0 ? handles[k].fd_step(v[k]) : -handles[k].fd_step(v[k]);
@@ -536,7 +530,8 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
     // optimum: re-anchoring there would gain no more than the surrogate's error.
     if (gain < kFitTolerance || matched) break;
     apply(model, handles, u.data());
-    s = anchor_at(model, handles, values(u), cache, counter, &s);
+    const bool trusted = std::abs(ll_p - predicted) < kCurvatureTrust;
+    s = anchor_at(model, handles, values(u), cache, counter, trusted ? &s : nullptr);
   }
   out.anchors = std::min(out.anchors, kMaxAnchors);
   out.log_likelihood_after = ll;

@@ -85,7 +85,11 @@ std::string second_order_problem(const Suite& suite, int order) {
   const double B = suite.robot.wheelbase_m;
   for (const SuiteExperiment& ex : suite.experiments) {
     std::size_t most = 0;
-    if (!ex.logged) most = second_order_piece_count(path_model_pieces(ex.path, B, suite.model_effects), B);
+    if (!ex.logged) {
+      std::vector<double> durations;
+      const std::vector<ArcSegment> pieces = path_model_pieces(ex.path, B, suite.model_effects, &durations);
+      most = second_order_piece_count(pieces, durations, B, suite.model_effects);
+    }
     for (const SuiteRun& run : ex.logged ? ex.runs : std::vector<SuiteRun>{}) {
       most = std::max(most, second_order_piece_count(coarsen_pieces(run.pieces, B), B));
     }

@@ -45,8 +45,15 @@ Prediction predict_second_order(const std::vector<ArcSegment>& pieces,
                                 const EffectList& effects, double heading0_rad = 0.0);
 
 /// The number of quadrature pieces predict_second_order cuts `pieces` into (before any
-/// effect's split); above kMaxSecondOrderPieces (limits.hpp) it throws std::length_error.
+/// effect's split) for effects that do not use the acceleration; above kMaxSecondOrderPieces
+/// (limits.hpp) predict_second_order throws InputError (key "order 2"), as it does when the
+/// effects cut the pieces beyond it (a smooth history term, Effect::refines) while the model
+/// has per-run constants (the cost is quadratic only then; without, beyond kMaxModelPieces).
 std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m);
+/// The same for these effects and durations (pieces whose speed changes are not merged when an
+/// effect uses the acceleration).
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                                     double wheelbase_m, const EffectList& effects);
 
 /// Merges consecutive pieces (e.g. the per-sample pieces of a logged run) into pieces that turn
 /// at most kPieceMaxAngle and travel at most kPieceMaxTravel, never merging across a reversal
