@@ -143,15 +143,34 @@ BENCHMARK(BM_SimulatorLoggedRun)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)-
 // path (35 s at 50 Hz: lines at three speeds, a spin, an arc, a reversal), on every core.
 // Arg 0: no effect; 1: the speed-dependent scale of that config (factors per leg of equal
 // samples); 2: a scale that depends on the distance travelled, s (factors per sample, so the
-// legs are single samples). The expressions are evaluated when the simulator is built, never
-// per run: the per-run cost is that of the legs they give.
+// legs are single samples); 3: a lateral slip in v and omega (per leg; the scalar kernel, which
+// takes the slip); 4: a scale drawn once per run (random: the legs rebuilt for each run's
+// draw); 5: the same drawn scale growing with s (every sample a leg, rebuilt per run: the
+// costliest kind); 6: a slip nonlinear in the heading theta (per sample; the model cuts its
+// pieces finer). Systematic expressions are evaluated when the simulator is built, never per
+// run: their per-run cost is that of the legs they give.
 odomcov::EffectList custom_variant(int variant) {
   if (variant == 0) return {};
   odomcov::CustomEffect def;
   def.name = "bench";
   def.parameters = {"a"};
-  def.scale.text = variant == 1 ? "1 + a * (v - 0.4)" : "1 + a * min(s, 5)";
-  return {odomcov::define_custom_effect(def, {0.02})};
+  std::vector<double> start{0.02};
+  switch (variant) {
+    case 1: def.scale.text = "1 + a * (v - 0.4)"; break;
+    case 2: def.scale.text = "1 + a * min(s, 5)"; break;
+    case 3: def.lateral.text = "0.2 * a - a * v * omega"; break;
+    case 4: def.scale.text = "1 + a"; def.random = {"a"}; start.push_back(0.002); break;
+    case 5: def.scale.text = "1 + a * min(s, 5)"; def.random = {"a"}; start.push_back(0.002); break;
+    default: def.lateral.text = "a * sin(3 * theta)"; break;
+  }
+  return {odomcov::define_custom_effect(def, start)};
+}
+
+const char* custom_label(std::int64_t variant) {
+  static const char* const labels[] = {"no effect", "custom, speed", "custom, distance", "custom lateral, v omega",
+                                       "custom, scale drawn per run", "custom, drawn scale x distance",
+                                       "custom lateral, sin(3 theta)"};
+  return labels[variant];
 }
 
 void BM_SimulatorCustom(benchmark::State& state) {
@@ -161,10 +180,10 @@ void BM_SimulatorCustom(benchmark::State& state) {
   const int threads = static_cast<int>(std::thread::hardware_concurrency());
   const std::int64_t runs = 2048;
   time_simulation(state, sim, runs, threads);
-  state.SetLabel(state.range(0) == 0 ? "no effect" : state.range(0) == 1 ? "custom, speed" : "custom, distance");
+  state.SetLabel(custom_label(state.range(0)));
 }
 
-BENCHMARK(BM_SimulatorCustom)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_SimulatorCustom)->DenseRange(0, 6)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
 
 // Building the simulator (the expressions evaluated once per leg or sample of the path), and
 // the model side (resolve + first-order propagation, what every likelihood evaluation does per
@@ -179,7 +198,7 @@ void BM_SimulatorBuildCustom(benchmark::State& state) {
   }
 }
 
-BENCHMARK(BM_SimulatorBuildCustom)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_SimulatorBuildCustom)->DenseRange(0, 6)->Unit(benchmark::kMicrosecond);
 
 void BM_PredictCustom(benchmark::State& state) {
   static const odomcov::Config c =
@@ -191,9 +210,10 @@ void BM_PredictCustom(benchmark::State& state) {
     benchmark::DoNotOptimize(odomcov::predict(pieces, durations, c.robot, effects).cov);
   }
   state.counters["pieces"] = static_cast<double>(pieces.size());
+  state.SetLabel(custom_label(state.range(0)));
 }
 
-BENCHMARK(BM_PredictCustom)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_PredictCustom)->DenseRange(0, 6)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

@@ -13,6 +13,7 @@
 //   kTagPerRun | e << 8       per-run draws of effect slot e (the counter's sample = draw number)
 //   kTagMeasurement           measurement noise of synthesised suites
 //   kTagGroup                 group_variation's draw per group (run = hash of the group name)
+//   kTagStartHeading          a synthesised run's start heading (world experiments' heading0)
 //
 // The seed -> numbers mapping, in full (docs/performance.md; the SIMD kernels keep it exactly):
 // key = (seed bits 0-31, seed bits 32-63). A draw's four output words w0..w3 give two 64-bit
@@ -40,6 +41,7 @@ inline constexpr std::uint32_t kTagEffect = 0x10000;
 inline constexpr std::uint32_t kTagPerRun = 0x20000;
 inline constexpr std::uint32_t kTagMeasurement = 0x30000;
 inline constexpr std::uint32_t kTagGroup = 0x40000;
+inline constexpr std::uint32_t kTagStartHeading = 0x50000;
 /// derive_seed(seed, kGroupSeedStream) keys the group draws (group_effects), apart from every
 /// experiment's own seed derive_seed(seed, i) for i < 2^62.
 inline constexpr std::uint64_t kGroupSeedStream = 0xC000000000000001ull;

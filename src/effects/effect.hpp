@@ -62,36 +62,60 @@ struct Motion {
   double since_reversal_left_m = HUGE_VAL, since_reversal_right_m = HUGE_VAL;
   double t_s = 0.0;  // time at the start of the increment
   double s_m = 0.0;  // mean wheel travel (|dL| + |dR|)/2 so far, at the start of the increment
+  /// Acceleration along the path: (v - v of the previous increment)/dt, with v = 0 before the
+  /// first increment. On a model piece, the piece's own speed against the previous piece's (a
+  /// piece the model cuts further for its own accuracy keeps its parent's value).
+  double a_mps2 = 0.0;
+  double omega_radps = 0.0;  // turn rate (dR - dL)/(B dt), nominal B
+  double turn_rad = 0.0;     // encoder heading change (dR - dL)/B over the increment, nominal B
+  double theta_rad = 0.0;    // encoder heading since the run's start, at the start of the increment
+  double heading0_rad = 0.0;  // the run's start heading in the reference's frame (0 if unknown)
 };
 
 /// Builds the Motion of consecutive increments, keeping time, distance and each wheel's
 /// direction. `wheelbase_m` is the nominal one (curvature as the encoders see it).
 class MotionTracker {
  public:
-  explicit MotionTracker(double wheelbase_m) : wheelbase_m_(wheelbase_m) {}
+  /// `heading0_rad`: the run's start heading in the reference's own frame (Motion::heading0_rad).
+  explicit MotionTracker(double wheelbase_m, double heading0_rad = 0.0)
+      : wheelbase_m_(wheelbase_m), heading0_rad_(heading0_rad) {}
   /// The Motion of the next increment (the first of `count` identical ones), then advances past
   /// all `count` of them.
   Motion next(double dL_m, double dR_m, double dt_s, std::int64_t count = 1);
 
  private:
   double wheelbase_m_;
-  double t_s_ = 0.0, s_m_ = 0.0;
+  double heading0_rad_;
+  double t_s_ = 0.0, s_m_ = 0.0, theta_rad_ = 0.0;
+  double v_mps_ = 0.0;  // of the last increment (0 before the first)
   int dir_left_ = 1, dir_right_ = 1;
   double since_left_ = HUGE_VAL, since_right_ = HUGE_VAL;
 };
 
 /// What a systematic effect does to one increment's true motion: true travel of each wheel =
-/// scale x encoder + offset, true wheelbase = factor x nominal. Effects compose: scales and the
-/// factor multiply, offsets add (applied after every scale).
+/// scale x encoder + offset, true wheelbase = factor x nominal, a lateral slip of the centre of
+/// `lateral` metres to the left per metre of mean wheel travel (|dL| + |dR|)/2, and the white
+/// wheel noise variance k^2 |dL| (and |dR|) times `noise_factor`. Effects compose: scales, the
+/// wheelbase factor and the noise factor multiply, offsets and lateral slips add (offsets
+/// applied after every scale).
+///
+/// Where the lateral slip acts (both sides): it accumulates along the increment's arc as the
+/// travel does, so the increment's displacement in its start frame is (d + i l) U(a) with
+/// d the true centre travel, l = lateral x (|dL| + |dR|)/2, a the true heading change and
+/// U(a) = int_0^1 e^{i a u} du = sinc(a/2) e^{i a/2}: the lateral part is l sinc(a/2) to the
+/// left of the chord's heading (a/2 into the increment). A piece of any length then gives the
+/// same displacement as its samples together (docs/conventions.md, "Lateral slip").
 struct Systematic {
   double scale_left = 1.0, scale_right = 1.0;
   double wheelbase_factor = 1.0;
   double offset_left_m = 0.0, offset_right_m = 0.0;
+  double lateral = 0.0;       // [m/m] leftward slip per metre of mean wheel travel
+  double noise_factor = 1.0;  // on both wheels' white noise variance
 
   bool operator==(const Systematic& o) const {
     return scale_left == o.scale_left && scale_right == o.scale_right &&
            wheelbase_factor == o.wheelbase_factor && offset_left_m == o.offset_left_m &&
-           offset_right_m == o.offset_right_m;
+           offset_right_m == o.offset_right_m && lateral == o.lateral && noise_factor == o.noise_factor;
   }
   ArcSegment travel(double dL_m, double dR_m) const {
     return {scale_left * dL_m + offset_left_m, scale_right * dR_m + offset_right_m};
@@ -100,8 +124,9 @@ struct Systematic {
 
 /// What a systematic effect's factors depend on, so the simulator knows how often to evaluate
 /// them: never (`none`: once per path), on the increment only (`increment`: dL, dR, dt, v,
-/// kappa, r, dir, turn, constant along a leg of equal samples), or on the history (`history`:
-/// t, s or the reversal state, evaluated per sample).
+/// kappa, r, dir, turn, omega, constant along a leg of equal samples), or on the history
+/// (`history`: t, s, theta, heading, the acceleration a or the reversal state, evaluated per
+/// sample).
 enum class Dependence { none = 0, increment = 1, history = 2 };
 
 /// What an effect keeps from one run to the next sample (per-run constants, the distance to the
@@ -135,6 +160,8 @@ struct TravelTerm {
 /// robot's values and the systematic factors (every effect's `systematic` for this piece's
 /// motion, folded in first as on the world side, so no effect's model depends on the order
 /// effects are listed); each effect's `model` then adds what it models.
+class Effect;
+
 struct PieceModel {
   ArcSegment encoder;        // input: encoder travel over the piece
   double wheelbase_m = 0.0;  // input: nominal wheelbase
@@ -143,11 +170,21 @@ struct PieceModel {
   double scale_left = 1.0;   // input, systematic: true travel = scale x encoder (+ offset)
   double scale_right = 1.0;
   double wheelbase_factor = 1.0;  // input, systematic: true wheelbase = factor x nominal
-  Eigen::Matrix2d wheel_cov = Eigen::Matrix2d::Zero();  // white (e_L, e_R) over the piece
+  /// input: every active effect, for an effect whose random part moves its own systematic terms
+  /// (others_systematic).
+  const std::vector<std::unique_ptr<Effect>>* effects = nullptr;
+  /// white (e_L, e_R) over the piece: k^2 |travel| times the systematic noise factor
+  Eigen::Matrix2d wheel_cov = Eigen::Matrix2d::Zero();
   double heading_var = 0.0;  // extra white heading variance over the piece
-  /// One column per standard-normal per-run constant: its effect on (e_L, e_R) over the piece.
-  std::vector<Eigen::Vector2d> run_columns;
+  /// One column per standard-normal per-run constant: its effect on (e_L, e_R, e_lat) over the
+  /// piece, e_lat the piece's lateral displacement (Systematic::lateral times the mean wheel
+  /// travel), a change of the true wheelbase written as the wheel errors that turn the same.
+  std::vector<Eigen::Vector3d> run_columns;
 };
+
+/// The systematic terms of every effect of `piece.effects` but `self`, for the piece's motion:
+/// what an effect whose random draw moves its own terms composes them with (custom.cpp).
+Systematic others_systematic(const PieceModel& piece, const Effect* self);
 
 class Effect {
  public:
@@ -184,6 +221,11 @@ class Effect {
     return "";
   }
 
+  /// Model side: true when the systematic terms vary smoothly with the history along a piece
+  /// (a custom expression in s, t, theta or heading): resolve then cuts a piece finer wherever
+  /// one evaluation at its middle would miss their mean along it (kRefineTolerance).
+  virtual bool refines() const { return false; }
+
   // ---- World side: randomness -----------------------------------------------------------------
   // The simulator runs these for a block of runs at once in SIMD lanes (and run by run in its
   // scalar reference, with the same arithmetic), so an effect states what it does per leg rather
@@ -197,6 +239,15 @@ class Effect {
   virtual bool stochastic() const { return false; }
   /// Per-run values (per lane, once per run), e.g. per-run normals or the first event's distance.
   virtual void begin_run(RunState& state, const Draws& draws) const { (void)state, (void)draws; }
+  /// True when the systematic terms depend on this run's draws (a custom effect with `random:`
+  /// parameters): the simulator then leaves the effect out of the legs it builds once per path
+  /// and composes, for every leg of every run, run_systematic with the leg's other terms.
+  virtual bool per_run_systematic() const { return false; }
+  /// The systematic terms of one increment for this run's draws (`state` from begin_run),
+  /// composed into `factors` as systematic() does. Thread-safe: runs are simulated in parallel.
+  virtual void run_systematic(const Motion& motion, const RunState& state, Systematic& factors) const {
+    (void)motion, (void)state, (void)factors;
+  }
   /// Mixes the standard normals of the two wheels' noise before they are scaled:
   /// z_R <- from_left z_L + from_right z_R. Returns false when the effect does not mix.
   virtual bool noise_mix(double& from_left, double& from_right) const {
@@ -221,13 +272,13 @@ class Effect {
   virtual void model(PieceModel& piece) const { (void)piece; }
 };
 
-/// The most standard-normal per-run constants a model may carry (per_run_radius has two); the
-/// engine keeps their columns in fixed storage.
-inline constexpr int kMaxRunConstants = 4;
+/// The engine keeps the per-run constants' columns in fixed storage of kMaxRunConstants
+/// (effects.hpp: per_run_radius has two, a custom effect one per random parameter).
+using odomcov::kMaxRunConstants;
 
 /// A piece as every propagator sees it once the effects have spoken: the true motion (systematic
-/// factors applied), the white noise intensity of (e_dtheta, e_d) over the piece, and the effect
-/// of each standard-normal per-run constant on (e_dtheta, e_d). The first-order engine (predict)
+/// factors applied) and the white noise intensity of (e_dtheta, e_d) over the piece (the per-run
+/// constants' columns are the path's: ResolvedPath::columns). The first-order engine (predict)
 /// and any higher-order propagator consume these, so effects are modelled in one place.
 struct ResolvedPiece {
   /// Built from its encoder travel, the rest set by resolve (a user-provided constructor: the
@@ -236,11 +287,10 @@ struct ResolvedPiece {
 
   ArcSegment encoder;            // encoder travel over the piece
   double center_m = 0.0;         // true centre travel d
+  double lateral_m = 0.0;        // true lateral slip l (to the left; Systematic, "lateral")
   double angle_rad = 0.0;        // true heading change a
   double wheelbase_true_m = 0.0;
   Matrix2 intensity = Matrix2::Zero();  // cov of (e_dtheta, e_d) accumulated over the piece
-  // 2 x run_constants: per-run constants -> (e_dtheta, e_d)
-  Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, kMaxRunConstants> input_columns;
 };
 
 /// The resolved path, plus what acts after the path: the measurement hooks (reference_offset).
@@ -251,18 +301,35 @@ struct ResolvedPiece {
 struct ResolvedPath {
   std::vector<ResolvedPiece> pieces;
   int run_constants = 0;
+  /// Piece after piece, the 3 x run_constants effect of each standard-normal per-run constant on
+  /// (e_dtheta, e_d, e_lat), spread uniformly along the piece as its own motion is (column-major;
+  /// empty without per-run constants, so that a piece stays small on the common path).
+  std::vector<double> input_columns;
   std::vector<std::shared_ptr<const Effect>> measurement_effects;
 
+  Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic>> columns(std::size_t piece) const {
+    return {input_columns.data() + 3 * static_cast<std::size_t>(run_constants) * piece, 3, run_constants};
+  }
   void measure(Vector3& pose, Matrix3& P_world) const;
 };
 
 /// Applies every effect's model side to each encoder piece (systematic factors for the piece's
 /// motion first, then each effect's `model`) for a robot (nominal wheelbase, model's wheel
 /// noise). `durations_s` gives each piece's duration (empty: unknown, so the motion's dt and v
-/// are NaN).
+/// are NaN); `heading0_rad` the run's start heading in the reference's frame (the `heading`
+/// variable of custom effects). A piece is cut where a history effect changes its terms inside
+/// it (Effect::split_at) and, for effects whose terms vary smoothly along it
+/// (Effect::refines), where one evaluation at its middle would miss their mean along it.
 ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
                      const std::vector<double>& durations_s, const Robot& robot,
-                     const EffectList& effects);
+                     const EffectList& effects, double heading0_rad = 0.0);
+
+/// The largest error resolve allows in a piece's terms (scales, wheelbase and noise factors,
+/// lateral slip per metre) from evaluating them once at the piece's middle instead of along it:
+/// the error of the mean then stays far below any Monte-Carlo error (1e-7 of the travel).
+inline constexpr double kRefineTolerance = 1e-7;
+/// resolve halves a piece at most this many times for kRefineTolerance (2^8 parts).
+inline constexpr int kMaxRefineDepth = 8;
 
 /// A catalogue entry: the public description plus the factory.
 struct EffectType {

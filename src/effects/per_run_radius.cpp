@@ -22,8 +22,8 @@ class PerRunRadius final : public Effect {
   }
   int run_constants() const override { return 2; }
   void model(PieceModel& piece) const override {
-    piece.run_columns.emplace_back(sigma_ * piece.scale_left * piece.encoder.left_m, 0.0);
-    piece.run_columns.emplace_back(0.0, sigma_ * piece.scale_right * piece.encoder.right_m);
+    piece.run_columns.emplace_back(sigma_ * piece.scale_left * piece.encoder.left_m, 0.0, 0.0);
+    piece.run_columns.emplace_back(0.0, sigma_ * piece.scale_right * piece.encoder.right_m, 0.0);
   }
 
  private:
@@ -33,14 +33,15 @@ class PerRunRadius final : public Effect {
 }  // namespace
 
 EffectType per_run_radius_type() {
-  return {{"per_run_radius",
-           {{"sigma", "", 0.0, 1e300, false, false, 0.0, 0.002}},
-           "wheel radii that change from run to run (tyre pressure, load, temperature)",
-           "variance grows as distance squared instead of linearly; each run keeps its own "
-           "drift throughout",
-           "each wheel's radius off by a relative N(0, sigma^2), drawn once per run",
-           /*systematic=*/false},
-          [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
+  EffectInfo info{"per_run_radius",
+                  {{"sigma", "", 0.0, 1e300, false, false, 0.0, 0.002}},
+                  "wheel radii that change from run to run (tyre pressure, load, temperature)",
+                  "variance grows as distance squared instead of linearly; each run keeps its own "
+                  "drift throughout",
+                  "each wheel's radius off by a relative N(0, sigma^2), drawn once per run",
+                  /*systematic=*/false};
+  info.run_constants = 2;
+  return {info, [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<PerRunRadius>(v[0]);
           }};
 }

@@ -51,4 +51,21 @@ inline __attribute__((always_inline)) void advance(Pose<V>& p, V ds, V ch, V sh,
   p.theta = p.theta + (h + h);
 }
 
+/// The same with a lateral slip `lat` per sample, spread along the arc as the travel is: the
+/// displacement is (ds + i lat) sinc(h) at heading theta + h (effects' Systematic, "lateral").
+/// A leg without slip takes advance, so its bits do not depend on this formula.
+template <class V>
+inline __attribute__((always_inline)) void advance_lateral(Pose<V>& p, V ds, V lat, V ch, V sh,
+                                                           V sinc, V h) {
+  const V chord = ds * sinc;
+  const V side = lat * sinc;
+  const V mc = p.c * ch - p.s * sh;
+  const V ms = p.s * ch + p.c * sh;
+  p.x = p.x + (chord * mc - side * ms);
+  p.y = p.y + (chord * ms + side * mc);
+  p.c = mc * ch - ms * sh;
+  p.s = ms * ch + mc * sh;
+  p.theta = p.theta + (h + h);
+}
+
 // NOLINTEND(llvm-header-guard)

@@ -43,6 +43,7 @@ struct LegStep {
   double cos_half = 1.0;
   double sin_half = 0.0;
   double inv_two_b = 0.0;  // 1/(2B), B the true wheelbase
+  double lateral_m = 0.0;  // leftward slip per sample (Systematic::lateral x (|L| + |R|)/2)
   bool series_sinc = true;  // |h0| <= kSincSeriesMax: most lanes take the sinc series
 };
 
@@ -70,7 +71,11 @@ inline void step(Pose<double>& p, const LegStep& leg, double noise_l, double noi
   const double sh = leg.sin_half * ce + leg.cos_half * se;
   const double h = leg.half_rad + eps;
   const double sinc = std::abs(h) <= kSincSeriesMax ? sinc_series(h * h, identity) : sh / h;
-  advance(p, ds, ch, sh, sinc, h);
+  if (leg.lateral_m != 0.0) {
+    advance_lateral(p, ds, leg.lateral_m, ch, sh, sinc, h);
+  } else {
+    advance(p, ds, ch, sh, sinc, h);
+  }
 }
 
 inline void renormalise(Pose<double>& p) {

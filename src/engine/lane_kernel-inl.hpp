@@ -489,7 +489,11 @@ class Block {
       special = hn::Or(special, hn::Le(hn::Abs(h), c(arc::kSincSeriesMax)));
     }
     if (HWY_LIKELY(hn::AllFalse(DF(), special))) {
-      lanes::HWY_NAMESPACE::advance(p, ds, ch, sh, sinc, h);  // this target's copy
+      if (leg.lateral_m != 0.0) {  // this target's copies
+        lanes::HWY_NAMESPACE::advance_lateral(p, ds, c(leg.lateral_m), ch, sh, sinc, h);
+      } else {
+        lanes::HWY_NAMESPACE::advance(p, ds, ch, sh, sinc, h);
+      }
       return;
     }
     scalar_lanes(p, leg, noise_l, noise_r);

@@ -48,6 +48,13 @@ struct EndPose {
   double x, y, theta;
 };
 
+/// What a leg was built from, for a plan whose legs change per run (Plan::per_run_legs).
+struct LegSource {
+  ArcSegment increment;
+  effects::Motion motion;    // of the leg's first sample
+  effects::Systematic sys;   // every effect's terms but the per-run ones
+};
+
 struct Plan {
   std::vector<Leg> legs;
   std::uint32_t samples = 0;  // per run
@@ -58,17 +65,26 @@ struct Plan {
   std::vector<std::uint32_t> draw_tags;            // per leg: Philox tags of its sample normals
   std::vector<LaneOp> ops;                         // per leg, in effect order
   std::vector<std::uint8_t> event_effects;         // indices into `stochastic` with events
+  // Effects whose systematic terms depend on the run's draws (a custom effect's `random:`
+  // parameters; indices into `stochastic`): each run rebuilds every leg from its source with
+  // their terms composed in (reference_run, run by run; the legs differ between lanes).
+  std::vector<std::uint8_t> per_run_terms;
+  std::vector<LegSource> sources;  // per leg, when per_run_terms is not empty
+  Robot robot;
 
   bool general() const { return !stochastic.empty(); }
+  bool per_run_legs() const { return !per_run_terms.empty(); }
 };
 
 /// The plan of a schedule of samples through these effects (which must outlive it): the legs
 /// with every systematic factor folded in, and the stochastic effects' operations per leg.
+/// `heading0_rad`: the run's start heading in the reference's frame (effects' `heading`).
 Plan make_plan(const Robot& robot, const std::vector<SampleRun>& schedule,
-               const std::vector<std::unique_ptr<effects::Effect>>& effects);
+               const std::vector<std::unique_ptr<effects::Effect>>& effects,
+               double heading0_rad = 0.0);
 
 /// One run by the scalar reference kernel: plain C++, run by run, what every SIMD target must
-/// match bit for bit.
+/// match bit for bit (and the kernel of a plan whose legs change per run).
 EndPose reference_run(const Plan& plan, const random::Philox::key_type& key, std::uint64_t run);
 
 /// The plan's motion with zero noise (a plan without stochastic effects): the odometry.

@@ -67,8 +67,10 @@ struct Simulator::Impl {
   std::int64_t samples = 0;
   Vector3 odometry_pose = Vector3::Zero();
 
-  Impl(const Robot& robot, const std::vector<SampleRun>& schedule, const EffectList& effect_list)
-      : effects(effects::instantiate(effect_list)), plan(lanes::make_plan(robot, schedule, effects)) {
+  Impl(const Robot& robot, const std::vector<SampleRun>& schedule, const EffectList& effect_list,
+       double heading0_rad)
+      : effects(effects::instantiate(effect_list)),
+        plan(lanes::make_plan(robot, schedule, effects, heading0_rad)) {
     double max_travel = 0.0;
     for (const Leg& leg : plan.legs) {
       samples += leg.count;
@@ -94,17 +96,24 @@ struct Simulator::Impl {
     return pose_error(pose, odometry_pose);
   }
 
-  /// The errors of runs first .. first+count-1 (count <= kMaxRuns) by the selected SIMD kernel.
+  /// The errors of runs first .. first+count-1 (count <= kMaxRuns) by the selected SIMD kernel,
+  /// or run by run by the scalar reference when the legs change per run (their lanes would not
+  /// share a leg).
   void run_errors(const random::Philox::key_type& key, std::uint64_t first, std::size_t count,
                   Vector3* out) const {
     std::array<lanes::EndPose, lanes::kMaxRuns> ends;
-    kernel().run(plan, key, first, count, ends.data());
+    if (plan.per_run_legs()) {
+      for (std::size_t j = 0; j < count; ++j) ends[j] = lanes::reference_run(plan, key, first + j);
+    } else {
+      kernel().run(plan, key, first, count, ends.data());
+    }
     for (std::size_t j = 0; j < count; ++j) out[j] = error_of(ends[j]);
   }
 };
 
-Simulator::Simulator(const Robot& robot, const Path& path, const EffectList& effects)
-    : impl_(std::make_unique<Impl>(robot, sample_schedule(path), effects)) {}
+Simulator::Simulator(const Robot& robot, const Path& path, const EffectList& effects,
+                     double heading0_rad)
+    : impl_(std::make_unique<Impl>(robot, sample_schedule(path), effects, heading0_rad)) {}
 
 namespace {
 
@@ -127,8 +136,10 @@ std::vector<SampleRun> piece_schedule(const std::vector<ArcSegment>& pieces,
 }  // namespace
 
 Simulator::Simulator(const Robot& robot, const std::vector<ArcSegment>& pieces,
-                     const std::vector<double>& durations_s, const EffectList& effects)
-    : impl_(std::make_unique<Impl>(robot, piece_schedule(pieces, durations_s), effects)) {}
+                     const std::vector<double>& durations_s, const EffectList& effects,
+                     double heading0_rad)
+    : impl_(std::make_unique<Impl>(robot, piece_schedule(pieces, durations_s), effects,
+                                   heading0_rad)) {}
 Simulator::~Simulator() = default;
 Simulator::Simulator(Simulator&&) noexcept = default;
 Simulator& Simulator::operator=(Simulator&&) noexcept = default;

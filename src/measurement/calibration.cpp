@@ -444,6 +444,12 @@ std::pair<double, double> axis_offsets(const Handle& h, double v) {
   return {-step, -2 * step};
 }
 
+/// A re-anchor takes the previous anchor's curvatures only when that anchor's surrogate foretold
+/// the exact log-likelihood at the new one within this: else the model is not quadratic over
+/// the step (a candidate that lands far from its neutral start), and its curvatures are taken
+/// afresh.
+constexpr double kCurvatureTrust = 1.0;
+
 /// The surrogate at the values v (model holds them): the anchor, two points per parameter and
 /// one per pair, all from the cache.
 Surrogate anchor_at(const SuiteModel& model, const std::vector<Handle>& handles,
@@ -524,7 +530,8 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
     // optimum: re-anchoring there would gain no more than the surrogate's error.
     if (gain < kFitTolerance || matched) break;
     apply(model, handles, u.data());
-    s = anchor_at(model, handles, values(u), cache, counter, &s);
+    const bool trusted = std::abs(ll_p - predicted) < kCurvatureTrust;
+    s = anchor_at(model, handles, values(u), cache, counter, trusted ? &s : nullptr);
   }
   out.anchors = std::min(out.anchors, kMaxAnchors);
   out.log_likelihood_after = ll;

@@ -39,7 +39,8 @@ std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<Run
 
 /// The fitted parameters of a model's effects (catalogue or custom, from their EffectInfo),
 /// split into systematic ones (moving the mean, fitted on the full likelihood) and random ones
-/// (fitted on the scatter part, which a mean misfit cannot inflate).
+/// (fitted on the scatter part, which a mean misfit cannot inflate): a random effect's, and the
+/// sd of a custom effect's parameter drawn per run.
 struct FittedNames {
   std::vector<std::string> systematic, random;
 };
@@ -48,7 +49,9 @@ FittedNames split_fitted_names(const EffectList& effects) {
   for (const EffectSpec& e : effects) {
     const EffectInfo& info = *info_of(e);
     for (const std::string& n : effect_candidate(info).fitted) {
-      (info.systematic ? out.systematic : out.random).push_back(n);
+      bool spread = false;
+      for (const EffectParameterInfo& p : info.parameters) spread = spread || (p.random_sd && n == info.name + "." + p.name);
+      (info.systematic && !spread ? out.systematic : out.random).push_back(n);
     }
   }
   return out;
@@ -193,7 +196,9 @@ std::vector<CandidateType> group_candidates(const Suite& suite, const EffectList
   for (const EffectSpec& e : model) {
     const EffectInfo* info = info_of(e);
     if (!info->systematic || info->grouped) continue;
-    for (const EffectParameterInfo& p : info->parameters) targets.push_back(e.name + "." + p.name);
+    for (const EffectParameterInfo& p : info->parameters) {
+      if (!p.random_sd) targets.push_back(e.name + "." + p.name);
+    }
   }
   for (const EffectInfo& info : effect_catalogue()) {
     for (const EffectParameterInfo& p : info.parameters) {

@@ -32,13 +32,18 @@ class Simulator {
   /// `robot`: nominal wheelbase (the odometry's) with the world's wheel noise constants;
   /// `effects`: the world's effects. Systematic effects are folded into the path; stochastic
   /// ones (noise correlation, slip, per-run radius, bumps) run in the SIMD lanes too (the
-  /// general kernel), each drawing from its own counter streams.
-  Simulator(const Robot& robot, const Path& path, const EffectList& effects = {});
+  /// general kernel), each drawing from its own counter streams; a custom effect's random
+  /// parameters rebuild the legs per run (the scalar reference kernel, run by run).
+  /// `heading0_rad`: the run's start heading in the reference's frame (effects' `heading`;
+  /// every run of this simulator starts there).
+  Simulator(const Robot& robot, const Path& path, const EffectList& effects = {},
+            double heading0_rad = 0.0);
   /// A logged run (SuiteRun::pieces): one sample per encoder piece, of the piece's duration
   /// (`durations_s` empty: unknown, so speed- and time-dependent effects see NaN), so the
   /// simulated run steps exactly as the model's prediction of that run resolves it.
   Simulator(const Robot& robot, const std::vector<ArcSegment>& pieces,
-            const std::vector<double>& durations_s, const EffectList& effects = {});
+            const std::vector<double>& durations_s, const EffectList& effects = {},
+            double heading0_rad = 0.0);
   ~Simulator();
   Simulator(Simulator&&) noexcept;
   Simulator& operator=(Simulator&&) noexcept;
