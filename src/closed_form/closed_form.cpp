@@ -111,40 +111,18 @@ Matrix2 wheel_noise_intensity(const ArcSegment& seg, double wheelbase_m, const W
 
 namespace detail {
 
-Matrix3 arc_noise_covariance(double center_m, const ArcFunctions& f, const Matrix2& intensity) {
-  const ArcIntegrals I(center_m, f);
-  const double q11 = intensity(0, 0);
-  const double q12 = 0.5 * (intensity(0, 1) + intensity(1, 0));
-  const double q22 = intensity(1, 1);
-  Matrix3 q;
-  q(0, 0) = q11 * I.aa + 2.0 * q12 * I.ac + q22 * I.cc;
-  q(0, 1) = q11 * I.ab + q12 * (I.bc - I.as) - q22 * I.cs;
-  q(0, 2) = q11 * I.a + q12 * I.c;
-  q(1, 1) = q11 * I.bb - 2.0 * q12 * I.bs + q22 * I.ss;
-  q(1, 2) = q11 * I.b - q12 * I.s;
-  q(2, 2) = q11;
-  q(1, 0) = q(0, 1);
-  q(2, 0) = q(0, 2);
-  q(2, 1) = q(1, 2);
-  return q;
-}
-
-Matrix32 arc_input_gain(double center_m, const ArcFunctions& f) {
-  const ArcIntegrals I(center_m, f);
-  Matrix32 g;
-  g << I.a, I.c, I.b, -I.s, 1.0, 0.0;
-  return g;
-}
-
 namespace {
 
-/// The integrals of the heading column (A_x, A_y) = (a_d - b_l, b_d + a_l) of a piece with a
-/// lateral slip l (arc_functions.hpp), from the unit integrals U (d = 1): a_x = x a_1 etc.
-struct LateralIntegrals {
+/// The integrals of the heading column (A_x, A_y) of a piece, alone and against the travel's
+/// direction (cos, sin): without a lateral slip A = (a, b) of the piece's own integrals; with
+/// one, (a_d - b_l, b_d + a_l) from the unit integrals U (d = 1): a_x = x a_1 etc.
+struct HeadingColumnIntegrals {
   double x, y;              // int A_x, int A_y
   double xx, yy, xy;        // int A_x^2, int A_y^2, int A_x A_y
   double xc, yc, xs, ys;    // int A_x cos, int A_y cos, int A_x sin, int A_y sin
-  LateralIntegrals(double d, double l, const ArcIntegrals& U) {
+  explicit HeadingColumnIntegrals(const ArcIntegrals& I)
+      : x(I.a), y(I.b), xx(I.aa), yy(I.bb), xy(I.ab), xc(I.ac), yc(I.bc), xs(I.as), ys(I.bs) {}
+  HeadingColumnIntegrals(double d, double l, const ArcIntegrals& U) {
     x = d * U.a - l * U.b;
     y = d * U.b + l * U.a;
     xx = d * d * U.aa - 2.0 * d * l * U.ab + l * l * U.bb;
@@ -157,27 +135,44 @@ struct LateralIntegrals {
   }
 };
 
-}  // namespace
-
-Matrix3 arc_noise_covariance(double center_m, double lateral_m, const ArcFunctions& f,
-                             const Matrix2& intensity) {
-  if (lateral_m == 0.0) return arc_noise_covariance(center_m, f, intensity);
-  const ArcIntegrals U(1.0, f);
-  const LateralIntegrals L(center_m, lateral_m, U);
+/// The white noise's covariance over a piece from the heading column's integrals L and the
+/// travel direction's (cos, sin) integrals of I.
+Matrix3 noise_covariance(const HeadingColumnIntegrals& L, const ArcIntegrals& I, const Matrix2& intensity) {
   const double q11 = intensity(0, 0);
   const double q12 = 0.5 * (intensity(0, 1) + intensity(1, 0));
   const double q22 = intensity(1, 1);
   Matrix3 q;
-  q(0, 0) = q11 * L.xx + 2.0 * q12 * L.xc + q22 * U.cc;
-  q(0, 1) = q11 * L.xy + q12 * (L.yc - L.xs) - q22 * U.cs;
-  q(0, 2) = q11 * L.x + q12 * U.c;
-  q(1, 1) = q11 * L.yy - 2.0 * q12 * L.ys + q22 * U.ss;
-  q(1, 2) = q11 * L.y - q12 * U.s;
+  q(0, 0) = q11 * L.xx + 2.0 * q12 * L.xc + q22 * I.cc;
+  q(0, 1) = q11 * L.xy + q12 * (L.yc - L.xs) - q22 * I.cs;
+  q(0, 2) = q11 * L.x + q12 * I.c;
+  q(1, 1) = q11 * L.yy - 2.0 * q12 * L.ys + q22 * I.ss;
+  q(1, 2) = q11 * L.y - q12 * I.s;
   q(2, 2) = q11;
   q(1, 0) = q(0, 1);
   q(2, 0) = q(0, 2);
   q(2, 1) = q(1, 2);
   return q;
+}
+
+}  // namespace
+
+Matrix3 arc_noise_covariance(double center_m, const ArcFunctions& f, const Matrix2& intensity) {
+  const ArcIntegrals I(center_m, f);
+  return noise_covariance(HeadingColumnIntegrals(I), I, intensity);
+}
+
+Matrix32 arc_input_gain(double center_m, const ArcFunctions& f) {
+  const ArcIntegrals I(center_m, f);
+  Matrix32 g;
+  g << I.a, I.c, I.b, -I.s, 1.0, 0.0;
+  return g;
+}
+
+Matrix3 arc_noise_covariance(double center_m, double lateral_m, const ArcFunctions& f,
+                             const Matrix2& intensity) {
+  if (lateral_m == 0.0) return arc_noise_covariance(center_m, f, intensity);
+  const ArcIntegrals U(1.0, f);
+  return noise_covariance(HeadingColumnIntegrals(center_m, lateral_m, U), U, intensity);
 }
 
 Matrix3 arc_input_gain(double center_m, double lateral_m, const ArcFunctions& f) {
@@ -188,7 +183,7 @@ Matrix3 arc_input_gain(double center_m, double lateral_m, const ArcFunctions& f)
     return g;
   }
   const ArcIntegrals U(1.0, f);
-  const LateralIntegrals L(center_m, lateral_m, U);
+  const HeadingColumnIntegrals L(center_m, lateral_m, U);
   g << L.x, U.c, U.s, L.y, -U.s, U.c, 1.0, 0.0, 0.0;
   return g;
 }
