@@ -333,7 +333,7 @@ std::vector<std::pair<const char*, CustomEffect::Expression*>> CustomEffect::exp
 
 std::vector<std::pair<const char*, const CustomEffect::Expression*>> CustomEffect::expressions() const {
   std::vector<std::pair<const char*, const Expression*>> out;
-  for (const auto& [key, e] : const_cast<CustomEffect*>(this)->expressions()) out.emplace_back(key, e);
+  for (const auto& [slot, e] : const_cast<CustomEffect*>(this)->expressions()) out.emplace_back(slot, e);
   return out;
 }
 
