@@ -91,11 +91,13 @@ HWY_INLINE VU mul_wide(VU a, std::uint32_t m) {
 #endif
 }
 
-/// Philox on kK vectors of counters at once (independent chains interleaved).
+/// Philox on the first kV vectors of counters at once (independent chains interleaved).
+template <std::size_t kV = kK>
 HWY_INLINE void philox(Words (&w)[kK], const RoundKeys& keys) {
+  static_assert(kV >= 1 && kV <= kK, "vectors of a block");
   for (int r = 0; r < 10; ++r) {
     const VU k0 = splat_u(keys.k0[r]), k1 = splat_u(keys.k1[r]);
-    for (std::size_t k = 0; k < kK; ++k) {
+    for (std::size_t k = 0; k < kV; ++k) {
       const VU p0 = mul_wide(w[k].w0, 0xD2511F53u);
       const VU p1 = mul_wide(w[k].w2, 0xCD9E8D57u);
       w[k].w0 = hn::Xor3(hn::ShiftRight<32>(p1), w[k].w1, k0);
@@ -104,6 +106,15 @@ HWY_INLINE void philox(Words (&w)[kK], const RoundKeys& keys) {
       w[k].w3 = p0;
     }
   }
+}
+
+/// Philox on the first `vectors` (1 .. kV) vectors only (the slow path's last, partial batch).
+template <std::size_t kV = kK>
+HWY_INLINE void philox_first(Words (&w)[kK], const RoundKeys& keys, std::size_t vectors) {
+  if constexpr (kV > 1) {
+    if (vectors < kV) return philox_first<kV - 1>(w, keys, vectors);
+  }
+  philox<kV>(w, keys);
 }
 
 /// The 64-bit candidate of words (lo, hi): lo | hi << 32.
@@ -195,13 +206,12 @@ HWY_NOINLINE void zig_attempt(std::size_t vectors, const std::uint64_t* bits_in,
     return;
   }
   Words w[kK];
-  for (std::size_t k = 0; k < kK; ++k) w[k] = {splat_u(0), splat_u(0), splat_u(0), splat_u(0)};
   for (std::size_t k = 0; k < vectors; ++k) {
     const VU runs = hn::Load(du, run + k * kN);
     w[k] = {hn::Load(du, sample + k * kN), hn::Load(du, tag + k * kN),
             hn::And(runs, splat_u(0xFFFFFFFFu)), hn::ShiftRight<32>(runs)};
   }
-  philox(w, keys);
+  philox_first(w, keys, vectors);
   for (std::size_t k = 0; k < vectors; ++k) {
     const auto index = hn::BitCast(di, hn::And(bits[k], splat_u(0xFF)));
     const auto tail = hn::AndNot(fast[k], hn::RebindMask(df, hn::Eq(index, hn::Zero(di))));
@@ -389,21 +399,23 @@ class Block {
     philox(w, keys_);
   }
 
-  /// The fast path of the normal from `bits` into slot `slot` of chunk sample s; the candidate
-  /// and the lanes it rejected are kept for the slow path (fixed addresses, no branch).
-  HWY_INLINE void normal(VU bits, std::size_t k, std::uint32_t s, std::size_t slot) {
+  /// The fast path of the normal from `bits` into slot `slot` of chunk sample s; a lane it
+  /// rejected keeps its candidate's bits there instead, for the slow path, and its bit in the
+  /// rejected lanes' mask (fixed addresses, no branch). Returns the rejected lanes.
+  HWY_INLINE MF normal(VU bits, std::size_t k, std::uint32_t s, std::size_t slot) {
     MF accepted;
-    hn::Store(zig_fast(bits, accepted), DF(), &z_[s][slot][k * kN]);
-    hn::Store(bits, DU(), &bits_[s][slot][k * kN]);
-    hn::StoreMaskBits(DF(), hn::Not(accepted), &rejected_[s][slot][k]);
+    const VF z = zig_fast(bits, accepted);
+    hn::Store(hn::IfThenElse(accepted, z, hn::BitCast(DF(), bits)), DF(), &z_[s][slot][k * kN]);
+    const MF rejected = hn::Not(accepted);
+    hn::StoreMaskBits(DF(), rejected, &rejected_[s][slot][k]);
+    return rejected;
   }
 
-  /// Marks slot `slot` of chunk sample s when the fast path rejected any of its lanes.
-  HWY_INLINE void flag(std::uint32_t s, std::size_t slot) {
-    std::uint64_t any = 0;
-    std::memcpy(&any, &rejected_[s][slot][0], kK);
+  /// Marks slot `slot` of chunk sample s when the fast path rejected any of its lanes (from the
+  /// masks in registers, not the mask bytes just stored).
+  HWY_INLINE void flag(std::uint32_t s, std::size_t slot, MF rejected) {
     const std::size_t bit = s * kSlots + slot;
-    flags_[bit / 64] |= std::uint64_t{any != 0} << (bit % 64);
+    flags_[bit / 64] |= std::uint64_t{!hn::AllFalse(DF(), rejected)} << (bit % 64);
   }
 
   /// Queues the rejected lanes of the flagged slots for the slow path.
@@ -423,7 +435,7 @@ class Block {
         for (; row != 0; row &= row - 1) {
           const std::size_t pos = hwy::Num0BitsBelowLS1Bit_Nonzero64(row);
           const std::size_t j = (pos / 8) * kN + pos % 8;
-          q.bits[count] = bits_[s][slot][j];
+          std::memcpy(&q.bits[count], &z_[s][slot][j], sizeof(double));  // the candidate
           q.at[count] = first + j;
           ++count;
         }
@@ -442,19 +454,22 @@ class Block {
   HWY_INLINE void draw_sample(const Leg& leg, std::uint32_t n, std::uint32_t s) {
     Words w[kK];
     draw(n, random::kTagWheelNoise, w);
-    for (std::size_t k = 0; k < kK; ++k) {
-      normal(candidate(w[k].w0, w[k].w1), k, s, 0);
-      normal(candidate(w[k].w2, w[k].w3), k, s, 1);
+    MF left = normal(candidate(w[0].w0, w[0].w1), 0, s, 0);
+    MF right = normal(candidate(w[0].w2, w[0].w3), 0, s, 1);
+    for (std::size_t k = 1; k < kK; ++k) {
+      left = hn::Or(left, normal(candidate(w[k].w0, w[k].w1), k, s, 0));
+      right = hn::Or(right, normal(candidate(w[k].w2, w[k].w3), k, s, 1));
     }
-    flag(s, 0);
-    flag(s, 1);
+    flag(s, 0, left);
+    flag(s, 1, right);
     if constexpr (kGeneral) {
       tags_[s] = plan_.draw_tags.data() + leg.draws_begin;
       for (std::uint32_t d = leg.draws_begin; d < leg.draws_end; ++d) {
         const std::size_t slot = 2 + d - leg.draws_begin;
         draw(n, plan_.draw_tags[d], w);
-        for (std::size_t k = 0; k < kK; ++k) normal(candidate(w[k].w0, w[k].w1), k, s, slot);
-        flag(s, slot);
+        MF any = normal(candidate(w[0].w0, w[0].w1), 0, s, slot);
+        for (std::size_t k = 1; k < kK; ++k) any = hn::Or(any, normal(candidate(w[k].w0, w[k].w1), k, s, slot));
+        flag(s, slot, any);
       }
     }
   }
@@ -716,8 +731,8 @@ class Block {
   Rejects rejects_[2];  // the slow path's queue and the next attempts', in turns
   Rejects* queue_ = &rejects_[0];
   std::uint32_t n0_ = 0;  // the chunk's first sample
-  alignas(64) double z_[kChunk][kSlots][kBlock];  // normals of the chunk
-  alignas(64) std::uint64_t bits_[kChunk][kSlots][kBlock];  // their candidates
+  // Normals of the chunk; until the slow path has run, a rejected lane's candidate bits.
+  alignas(64) double z_[kChunk][kSlots][kBlock];
   std::uint8_t rejected_[kChunk][kSlots][kK];  // lanes the fast path rejected, a bit each
   static constexpr std::size_t kFlagWords = (kChunk * kSlots + 63) / 64;
   std::uint64_t flags_[kFlagWords] = {};  // (sample, slot) pairs with rejected lanes
