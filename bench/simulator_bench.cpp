@@ -13,7 +13,7 @@
 //                               (50-100 Hz), 300 replicates per simulation; T = 2: two logged runs
 //                               at once, one per core. referee_s is what 171 such runs x 300
 //                               replicates would take at that rate.
-// Run: cmake --build build --target bench (bench/compare_numpy.sh adds the NumPy baseline).
+// Run: cmake --build build --target bench (bench/compare_numpy.py adds the NumPy baseline).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
