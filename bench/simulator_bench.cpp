@@ -7,11 +7,13 @@
 //   BM_SimulatorGeneral/E       Table III, 200 000 runs, one thread: E = 0 no effect, E = 1 the
 //                               general kernel with wheel_diameter_ratio, turn_slip and
 //                               per_run_radius (the ratio of the two times is the figure)
+//   BM_SimulatorRandomCustom/V/P  a custom effect's scale drawn per run (legs differ per run),
+//                               one thread: P = 1 in lanes, P = 0 the scalar reference
 //   BM_SimulatorLoggedRun/T     the bootstrap case: a logged run of 1300 irregular samples
 //                               (50-100 Hz), 300 replicates per simulation; T = 2: two logged runs
 //                               at once, one per core. referee_s is what 171 such runs x 300
 //                               replicates would take at that rate.
-// Run: cmake --build build --target bench (bench/compare_numpy.sh adds the NumPy baseline).
+// Run: cmake --build build --target bench (bench/compare_numpy.py adds the NumPy baseline).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -184,6 +186,42 @@ void BM_SimulatorCustom(benchmark::State& state) {
 }
 
 BENCHMARK(BM_SimulatorCustom)->DenseRange(0, 6)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+// A world whose legs change per run (custom_variant 4 and 5: the scale drawn per run), one
+// thread: P = 1 the SIMD kernel (each block builds its lanes' legs at every leg of the path and
+// loads them per lane), P = 0 the scalar reference run by run (Simulator::reference_error: how
+// such a world ran before it ran in lanes). The same runs, the same bits.
+void BM_SimulatorRandomCustom(benchmark::State& state) {
+  static const odomcov::Config c =
+      odomcov::load_config(ODOMCOV_SOURCE_DIR "/configs/effects/speed_scale.yaml");
+  const int variant = static_cast<int>(state.range(0));
+  const odomcov::Simulator sim(c.world_robot(), c.path, custom_variant(variant));
+  const std::int64_t runs = 512;
+  if (state.range(1) == 1) {
+    time_simulation(state, sim, runs, 1);
+  } else {
+    std::uint64_t seed = 1;
+    for (auto _ : state) {
+      odomcov::MomentAccumulator acc;
+      for (std::int64_t r = 0; r < runs; ++r) acc.add(sim.reference_error(seed, r));
+      benchmark::DoNotOptimize(acc.mean());
+      ++seed;
+    }
+    state.counters["steps/s"] = benchmark::Counter(static_cast<double>(runs * sim.samples_per_run()),
+                                                   benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["threads"] = 1;
+  }
+  state.SetLabel(std::string(custom_label(variant)) + (state.range(1) == 1 ? ", lanes" : ", scalar reference"));
+}
+
+BENCHMARK(BM_SimulatorRandomCustom)
+    ->Args({4, 0})
+    ->Args({4, 1})
+    ->Args({5, 0})
+    ->Args({5, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(2.0);
 
 // Building the simulator (the expressions evaluated once per leg or sample of the path), and
 // the model side (resolve + first-order propagation, what every likelihood evaluation does per

@@ -25,6 +25,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 #include "engine/lane_plan.hpp"
 
@@ -90,11 +91,13 @@ HWY_INLINE VU mul_wide(VU a, std::uint32_t m) {
 #endif
 }
 
-/// Philox on kK vectors of counters at once (independent chains interleaved).
+/// Philox on the first kV vectors of counters at once (independent chains interleaved).
+template <std::size_t kV = kK>
 HWY_INLINE void philox(Words (&w)[kK], const RoundKeys& keys) {
+  static_assert(kV >= 1 && kV <= kK, "vectors of a block");
   for (int r = 0; r < 10; ++r) {
     const VU k0 = splat_u(keys.k0[r]), k1 = splat_u(keys.k1[r]);
-    for (std::size_t k = 0; k < kK; ++k) {
+    for (std::size_t k = 0; k < kV; ++k) {
       const VU p0 = mul_wide(w[k].w0, 0xD2511F53u);
       const VU p1 = mul_wide(w[k].w2, 0xCD9E8D57u);
       w[k].w0 = hn::Xor3(hn::ShiftRight<32>(p1), w[k].w1, k0);
@@ -103,6 +106,15 @@ HWY_INLINE void philox(Words (&w)[kK], const RoundKeys& keys) {
       w[k].w3 = p0;
     }
   }
+}
+
+/// Philox on the first `vectors` (1 .. kV) vectors only (the slow path's last, partial batch).
+template <std::size_t kV = kK>
+HWY_INLINE void philox_first(Words (&w)[kK], const RoundKeys& keys, std::size_t vectors) {
+  if constexpr (kV > 1) {
+    if (vectors < kV) return philox_first<kV - 1>(w, keys, vectors);
+  }
+  philox<kV>(w, keys);
 }
 
 /// The 64-bit candidate of words (lo, hi): lo | hi << 32.
@@ -194,13 +206,12 @@ HWY_NOINLINE void zig_attempt(std::size_t vectors, const std::uint64_t* bits_in,
     return;
   }
   Words w[kK];
-  for (std::size_t k = 0; k < kK; ++k) w[k] = {splat_u(0), splat_u(0), splat_u(0), splat_u(0)};
   for (std::size_t k = 0; k < vectors; ++k) {
     const VU runs = hn::Load(du, run + k * kN);
     w[k] = {hn::Load(du, sample + k * kN), hn::Load(du, tag + k * kN),
             hn::And(runs, splat_u(0xFFFFFFFFu)), hn::ShiftRight<32>(runs)};
   }
-  philox(w, keys);
+  philox_first(w, keys, vectors);
   for (std::size_t k = 0; k < vectors; ++k) {
     const auto index = hn::BitCast(di, hn::And(bits[k], splat_u(0xFF)));
     const auto tail = hn::AndNot(fast[k], hn::RebindMask(df, hn::Eq(index, hn::Zero(di))));
@@ -246,8 +257,63 @@ struct LegCursor {
   }
 };
 
-template <bool kGeneral>
+/// A leg's step constants as vectors, the same in every lane: a leg of the path, broadcast.
+struct SharedLeg {
+  static constexpr bool kPerLane = false;
+  const Leg& leg;
+  HWY_INLINE VF center(std::size_t) const { return splat(leg.center_m); }
+  HWY_INLINE VF half(std::size_t) const { return splat(leg.half_rad); }
+  HWY_INLINE VF cos_half(std::size_t) const { return splat(leg.cos_half); }
+  HWY_INLINE VF sin_half(std::size_t) const { return splat(leg.sin_half); }
+  HWY_INLINE VF inv_two_b(std::size_t) const { return splat(leg.inv_two_b); }
+  HWY_INLINE VF lateral(std::size_t) const { return splat(leg.lateral_m); }
+  HWY_INLINE VF sigma_left(std::size_t) const { return splat(leg.sigma_left); }
+  HWY_INLINE VF sigma_right(std::size_t) const { return splat(leg.sigma_right); }
+  HWY_INLINE bool any_lateral() const { return leg.lateral_m != 0.0; }
+  /// The scalar leg of lane j of vector k.
+  HWY_INLINE const Leg& of(std::size_t, std::size_t) const { return leg; }
+};
+
+/// A block's legs when they differ between its runs (Plan::per_run_legs): each lane's leg
+/// (run_leg) and its step constants structure of arrays, rebuilt at every leg of the path.
+struct LaneLegs {
+  alignas(64) double center[kBlock], half[kBlock], cos_half[kBlock], sin_half[kBlock];
+  alignas(64) double inv_two_b[kBlock], lateral[kBlock], sigma_left[kBlock], sigma_right[kBlock];
+  Leg leg[kBlock];
+  bool any_lateral = false;
+
+  void set(std::size_t j, const Leg& l) {
+    leg[j] = l;
+    center[j] = l.center_m, half[j] = l.half_rad, cos_half[j] = l.cos_half;
+    sin_half[j] = l.sin_half, inv_two_b[j] = l.inv_two_b, lateral[j] = l.lateral_m;
+    sigma_left[j] = l.sigma_left, sigma_right[j] = l.sigma_right;
+  }
+};
+
+/// The step constants of a LaneLegs table, loaded per vector.
+struct PerLaneLeg {
+  static constexpr bool kPerLane = true;
+  const LaneLegs& t;
+  static HWY_INLINE VF at(const double* a, std::size_t k) { return hn::Load(DF(), a + k * kN); }
+  HWY_INLINE VF center(std::size_t k) const { return at(t.center, k); }
+  HWY_INLINE VF half(std::size_t k) const { return at(t.half, k); }
+  HWY_INLINE VF cos_half(std::size_t k) const { return at(t.cos_half, k); }
+  HWY_INLINE VF sin_half(std::size_t k) const { return at(t.sin_half, k); }
+  HWY_INLINE VF inv_two_b(std::size_t k) const { return at(t.inv_two_b, k); }
+  HWY_INLINE VF lateral(std::size_t k) const { return at(t.lateral, k); }
+  HWY_INLINE VF sigma_left(std::size_t k) const { return at(t.sigma_left, k); }
+  HWY_INLINE VF sigma_right(std::size_t k) const { return at(t.sigma_right, k); }
+  HWY_INLINE bool any_lateral() const { return t.any_lateral; }
+  HWY_INLINE const Leg& of(std::size_t k, std::size_t j) const { return t.leg[k * kN + j]; }
+};
+
+/// kGeneral: the stochastic effects' operations run (the general kernel); kPerLane: the legs
+/// differ between the block's runs (a custom effect's `random:` parameters), so the step loads
+/// each leg's constants per lane from a table built at the leg's start.
+template <bool kGeneral, bool kPerLane = false>
 class Block {
+  static_assert(kGeneral || !kPerLane, "legs differ per run only through stochastic effects");
+
  public:
   Block(const Plan& plan, const random::Philox::key_type& key, std::uint64_t first)
       : plan_(plan), key_(key), keys_(key), first_(first) {
@@ -312,7 +378,14 @@ class Block {
     for (std::uint32_t s = 0; s < count;) {
       const Leg& leg = *at.leg;
       const std::uint32_t m = at.left(count - s);
-      for (std::uint32_t e = s + m; s < e; ++s) step_sample(p, leg, n + s, s);
+      if constexpr (kPerLane) {
+        if (at.leg != built_) build_lane_legs(at.leg);
+        const PerLaneLeg legs{lane_legs_};
+        for (std::uint32_t e = s + m; s < e; ++s) step_sample(p, leg, legs, n + s, s);
+      } else {
+        const SharedLeg legs{leg};
+        for (std::uint32_t e = s + m; s < e; ++s) step_sample(p, leg, legs, n + s, s);
+      }
       at.skip(m);
     }
     for (std::size_t k = 0; k < kK; ++k) p_[k] = p[k];
@@ -326,21 +399,23 @@ class Block {
     philox(w, keys_);
   }
 
-  /// The fast path of the normal from `bits` into slot `slot` of chunk sample s; the candidate
-  /// and the lanes it rejected are kept for the slow path (fixed addresses, no branch).
-  HWY_INLINE void normal(VU bits, std::size_t k, std::uint32_t s, std::size_t slot) {
+  /// The fast path of the normal from `bits` into slot `slot` of chunk sample s; a lane it
+  /// rejected keeps its candidate's bits there instead, for the slow path, and its bit in the
+  /// rejected lanes' mask (fixed addresses, no branch). Returns the rejected lanes.
+  HWY_INLINE MF normal(VU bits, std::size_t k, std::uint32_t s, std::size_t slot) {
     MF accepted;
-    hn::Store(zig_fast(bits, accepted), DF(), &z_[s][slot][k * kN]);
-    hn::Store(bits, DU(), &bits_[s][slot][k * kN]);
-    hn::StoreMaskBits(DF(), hn::Not(accepted), &rejected_[s][slot][k]);
+    const VF z = zig_fast(bits, accepted);
+    hn::Store(hn::IfThenElse(accepted, z, hn::BitCast(DF(), bits)), DF(), &z_[s][slot][k * kN]);
+    const MF rejected = hn::Not(accepted);
+    hn::StoreMaskBits(DF(), rejected, &rejected_[s][slot][k]);
+    return rejected;
   }
 
-  /// Marks slot `slot` of chunk sample s when the fast path rejected any of its lanes.
-  HWY_INLINE void flag(std::uint32_t s, std::size_t slot) {
-    std::uint64_t any = 0;
-    std::memcpy(&any, &rejected_[s][slot][0], kK);
+  /// Marks slot `slot` of chunk sample s when the fast path rejected any of its lanes (from the
+  /// masks in registers, not the mask bytes just stored).
+  HWY_INLINE void flag(std::uint32_t s, std::size_t slot, MF rejected) {
     const std::size_t bit = s * kSlots + slot;
-    flags_[bit / 64] |= std::uint64_t{any != 0} << (bit % 64);
+    flags_[bit / 64] |= std::uint64_t{!hn::AllFalse(DF(), rejected)} << (bit % 64);
   }
 
   /// Queues the rejected lanes of the flagged slots for the slow path.
@@ -360,7 +435,7 @@ class Block {
         for (; row != 0; row &= row - 1) {
           const std::size_t pos = hwy::Num0BitsBelowLS1Bit_Nonzero64(row);
           const std::size_t j = (pos / 8) * kN + pos % 8;
-          q.bits[count] = bits_[s][slot][j];
+          std::memcpy(&q.bits[count], &z_[s][slot][j], sizeof(double));  // the candidate
           q.at[count] = first + j;
           ++count;
         }
@@ -379,19 +454,22 @@ class Block {
   HWY_INLINE void draw_sample(const Leg& leg, std::uint32_t n, std::uint32_t s) {
     Words w[kK];
     draw(n, random::kTagWheelNoise, w);
-    for (std::size_t k = 0; k < kK; ++k) {
-      normal(candidate(w[k].w0, w[k].w1), k, s, 0);
-      normal(candidate(w[k].w2, w[k].w3), k, s, 1);
+    MF left = normal(candidate(w[0].w0, w[0].w1), 0, s, 0);
+    MF right = normal(candidate(w[0].w2, w[0].w3), 0, s, 1);
+    for (std::size_t k = 1; k < kK; ++k) {
+      left = hn::Or(left, normal(candidate(w[k].w0, w[k].w1), k, s, 0));
+      right = hn::Or(right, normal(candidate(w[k].w2, w[k].w3), k, s, 1));
     }
-    flag(s, 0);
-    flag(s, 1);
+    flag(s, 0, left);
+    flag(s, 1, right);
     if constexpr (kGeneral) {
       tags_[s] = plan_.draw_tags.data() + leg.draws_begin;
       for (std::uint32_t d = leg.draws_begin; d < leg.draws_end; ++d) {
         const std::size_t slot = 2 + d - leg.draws_begin;
         draw(n, plan_.draw_tags[d], w);
-        for (std::size_t k = 0; k < kK; ++k) normal(candidate(w[k].w0, w[k].w1), k, s, slot);
-        flag(s, slot);
+        MF any = normal(candidate(w[0].w0, w[0].w1), 0, s, slot);
+        for (std::size_t k = 1; k < kK; ++k) any = hn::Or(any, normal(candidate(w[k].w0, w[k].w1), k, s, slot));
+        flag(s, slot, any);
       }
     }
   }
@@ -454,34 +532,40 @@ class Block {
     return random::kTagWheelRetry + static_cast<std::uint32_t>(slot);
   }
 
-  /// Sample n's step from the normals of chunk sample s.
-  HWY_INLINE void step_sample(Pose<VF> (&p)[kK], const Leg& leg, std::uint32_t n,
+  /// Sample n's step from the normals of chunk sample s; `leg` is the path's (its operations),
+  /// `legs` its step constants (SharedLeg or PerLaneLeg).
+  template <class L>
+  HWY_INLINE void step_sample(Pose<VF> (&p)[kK], const Leg& leg, const L& legs, std::uint32_t n,
                               std::uint32_t s) {
     const DF df;
     VF noise_l[kK], noise_r[kK];
     for (std::size_t k = 0; k < kK; ++k) {
-      noise_l[k] = splat(leg.sigma_left) * hn::Load(df, &z_[s][0][k * kN]);
-      noise_r[k] = splat(leg.sigma_right) * hn::Load(df, &z_[s][1][k * kN]);
+      noise_l[k] = legs.sigma_left(k) * hn::Load(df, &z_[s][0][k * kN]);
+      noise_r[k] = legs.sigma_right(k) * hn::Load(df, &z_[s][1][k * kN]);
     }
-    if constexpr (kGeneral) effects(leg, n, s, noise_l, noise_r);
-    for (std::size_t k = 0; k < kK; ++k) step(p[k], leg, noise_l[k], noise_r[k]);
+    if constexpr (kGeneral) effects(leg, legs, n, s, noise_l, noise_r);
+    for (std::size_t k = 0; k < kK; ++k) step(p[k], legs, k, noise_l[k], noise_r[k]);
     if ((n & arc::kRenormMask) == arc::kRenormMask) renormalise(p);
   }
 
-  /// The exact arc step on one vector; lanes outside the series bounds redo it in scalar code.
-  static HWY_INLINE void step(Pose<VF>& p, const Leg& leg, VF noise_l, VF noise_r) {
+  /// The exact arc step on vector k; lanes outside the series bounds redo it in scalar code.
+  template <class L>
+  static HWY_INLINE void step(Pose<VF>& p, const L& leg, std::size_t k, VF noise_l, VF noise_r) {
     const auto c = [](double v) { return splat(v); };
-    const VF eps = (noise_r - noise_l) * c(leg.inv_two_b);
-    const VF ds = c(leg.center_m) + c(0.5) * (noise_l + noise_r);
+    const VF eps = (noise_r - noise_l) * leg.inv_two_b(k);
+    const VF ds = leg.center(k) + c(0.5) * (noise_l + noise_r);
     const VF e2 = eps * eps;
     const VF se = sin_taylor(eps, e2, c);
     const VF ce = cos_taylor(e2, c);
-    const VF ch = c(leg.cos_half) * ce - c(leg.sin_half) * se;
-    const VF sh = c(leg.sin_half) * ce + c(leg.cos_half) * se;
-    const VF h = c(leg.half_rad) + eps;
+    const VF ch = leg.cos_half(k) * ce - leg.sin_half(k) * se;
+    const VF sh = leg.sin_half(k) * ce + leg.cos_half(k) * se;
+    const VF h = leg.half(k) + eps;
     MF special = hn::Gt(hn::Abs(eps), c(arc::kEpsTaylorMax));
     VF sinc;
-    if (leg.series_sinc) {
+    if constexpr (L::kPerLane) {
+      // Each lane takes the reference's own choice (the series within its bound).
+      sinc = hn::IfThenElse(hn::Le(hn::Abs(h), c(arc::kSincSeriesMax)), sinc_series(h * h, c), sh / h);
+    } else if (leg.leg.series_sinc) {
       sinc = sinc_series(h * h, c);
       special = hn::Or(special, hn::Gt(hn::Abs(h), c(arc::kSincSeriesMax)));
     } else {
@@ -489,20 +573,23 @@ class Block {
       special = hn::Or(special, hn::Le(hn::Abs(h), c(arc::kSincSeriesMax)));
     }
     if (HWY_LIKELY(hn::AllFalse(DF(), special))) {
-      if (leg.lateral_m != 0.0) {  // this target's copies
-        lanes::HWY_NAMESPACE::advance_lateral(p, ds, c(leg.lateral_m), ch, sh, sinc, h);
+      // A lane without slip in a vector with some takes advance_lateral with lat = 0, whose side
+      // terms are then +-0 and leave its pose's bits as advance does.
+      if (leg.any_lateral()) {  // this target's copies
+        lanes::HWY_NAMESPACE::advance_lateral(p, ds, leg.lateral(k), ch, sh, sinc, h);
       } else {
         lanes::HWY_NAMESPACE::advance(p, ds, ch, sh, sinc, h);
       }
       return;
     }
-    scalar_lanes(p, leg, noise_l, noise_r);
+    scalar_lanes(p, leg, k, noise_l, noise_r);
   }
 
  private:
   /// Rare: some lane is outside the series bounds; the vector takes the scalar step
   /// lane by lane from the pre-step state (within the bounds it is the vector formula).
-  static HWY_NOINLINE void scalar_lanes(Pose<VF>& p, const Leg& leg, VF noise_l,
+  template <class L>
+  static HWY_NOINLINE void scalar_lanes(Pose<VF>& p, const L& leg, std::size_t k, VF noise_l,
                                         VF noise_r) {
     const DF df;
     alignas(64) double v[7][kN];
@@ -515,7 +602,7 @@ class Block {
     hn::Store(noise_r, df, v[6]);
     for (std::size_t j = 0; j < kN; ++j) {
       arc::Pose<double> q{v[0][j], v[1][j], v[2][j], v[3][j], v[4][j]};
-      arc::step(q, leg, v[5][j], v[6][j]);
+      arc::step(q, leg.of(k, j), v[5][j], v[6][j]);
       v[0][j] = q.x, v[1][j] = q.y, v[2][j] = q.c, v[3][j] = q.s, v[4][j] = q.theta;
     }
     p = {hn::Load(df, v[0]), hn::Load(df, v[1]), hn::Load(df, v[2]), hn::Load(df, v[3]),
@@ -543,9 +630,28 @@ class Block {
     }
   }
 
+  /// Each lane's leg of the path leg at `path_leg` for its run's draws (run_leg, scalar: once
+  /// per leg and block) into the table the steps load.
+  HWY_NOINLINE void build_lane_legs(const Leg* path_leg) {
+    const std::size_t i = static_cast<std::size_t>(path_leg - plan_.legs.data());
+    effects::RunState states[kMaxEffects];
+    bool any_lateral = false;
+    for (std::size_t j = 0; j < kBlock; ++j) {
+      for (const std::uint8_t e : plan_.per_run_terms) {
+        for (int v = 0; v < 4; ++v) states[e].value[v] = values_[e][v][j];
+      }
+      const Leg leg = run_leg(plan_, i, states);
+      lane_legs_.set(j, leg);
+      any_lateral = any_lateral || leg.lateral_m != 0.0;
+    }
+    lane_legs_.any_lateral = any_lateral;
+    built_ = path_leg;
+  }
+
   /// The noise mixes, then each effect's operations in order; noise = sigma z + extra.
-  HWY_INLINE void effects(const Leg& leg, std::uint32_t n, std::uint32_t s, VF (&noise_l)[kK],
-                          VF (&noise_r)[kK]) {
+  template <class L>
+  HWY_INLINE void effects(const Leg& leg, const L& legs, std::uint32_t n, std::uint32_t s,
+                          VF (&noise_l)[kK], VF (&noise_r)[kK]) {
     const DF df;
     VF zl[kK], zr[kK], extra_l[kK], extra_r[kK];
     for (std::size_t k = 0; k < kK; ++k) {
@@ -571,8 +677,8 @@ class Block {
       }
     }
     for (std::size_t k = 0; k < kK; ++k) {
-      noise_l[k] = splat(leg.sigma_left) * zl[k] + extra_l[k];
-      noise_r[k] = splat(leg.sigma_right) * zr[k] + extra_r[k];
+      noise_l[k] = legs.sigma_left(k) * zl[k] + extra_l[k];
+      noise_r[k] = legs.sigma_right(k) * zr[k] + extra_r[k];
     }
   }
 
@@ -625,14 +731,19 @@ class Block {
   Rejects rejects_[2];  // the slow path's queue and the next attempts', in turns
   Rejects* queue_ = &rejects_[0];
   std::uint32_t n0_ = 0;  // the chunk's first sample
-  alignas(64) double z_[kChunk][kSlots][kBlock];  // normals of the chunk
-  alignas(64) std::uint64_t bits_[kChunk][kSlots][kBlock];  // their candidates
+  // Normals of the chunk; until the slow path has run, a rejected lane's candidate bits.
+  alignas(64) double z_[kChunk][kSlots][kBlock];
   std::uint8_t rejected_[kChunk][kSlots][kK];  // lanes the fast path rejected, a bit each
   static constexpr std::size_t kFlagWords = (kChunk * kSlots + 63) / 64;
   std::uint64_t flags_[kFlagWords] = {};  // (sample, slot) pairs with rejected lanes
   const std::uint32_t* tags_[kChunk] = {};                    // general: their legs' draw tags
   // The general kernel's per-run values, structure of arrays: [effect][value][lane].
   alignas(64) double values_[kGeneral ? kMaxEffects : 1][4][kBlock];
+  // Per-lane legs: the table of the leg built last (a member array only where it is used).
+  struct NoLegs {};
+  using LegTable = std::conditional_t<kPerLane, LaneLegs, NoLegs>;
+  LegTable lane_legs_;
+  const Leg* built_ = nullptr;
 };
 
 /// The kernel entry point (lane_plan.hpp's KernelFn): blocks of kBlock runs; the last block's
@@ -641,7 +752,11 @@ inline void run_blocks(const Plan& plan, const random::Philox::key_type& key, st
                        std::size_t count, EndPose* out) {
   for (std::size_t done = 0; done < count; done += kBlock) {
     const std::size_t valid = count - done < kBlock ? count - done : kBlock;
-    if (plan.general()) {
+    if (plan.per_run_legs()) {
+      Block<true, true> block(plan, key, first + done);
+      block.run();
+      block.write(out + done, valid);
+    } else if (plan.general()) {
       Block<true> block(plan, key, first + done);
       block.run();
       block.write(out + done, valid);

@@ -203,16 +203,11 @@ Plan make_plan(const Robot& robot, const std::vector<SampleRun>& schedule,
   return plan;
 }
 
-namespace {
-
-/// Leg i as this run sees it: its source's terms composed with those of the effects whose terms
-/// depend on the run's draws (one sin and cos per leg and run, nothing allocated). The effects'
-/// operations stay the plan's (built from the leg's path terms).
-Leg run_leg(const Plan& plan, std::size_t i, const RunEffects& fx) {
+Leg run_leg(const Plan& plan, std::size_t i, const effects::RunState* states) {
   const LegSource& src = plan.sources[i];
   effects::Systematic sys = src.sys;
   for (const std::uint8_t e : plan.per_run_terms) {
-    plan.stochastic[e]->run_systematic(src.motion, fx.states[e], sys);
+    plan.stochastic[e]->run_systematic(src.motion, states[e], sys);
   }
   const Leg& path_leg = plan.legs[i];
   Leg leg = make_leg(path_leg.count, src.increment, sys, plan.robot).leg;
@@ -220,8 +215,6 @@ Leg run_leg(const Plan& plan, std::size_t i, const RunEffects& fx) {
   leg.ops_begin = path_leg.ops_begin, leg.ops_end = path_leg.ops_end;
   return leg;
 }
-
-}  // namespace
 
 EndPose reference_run(const Plan& plan, const random::Philox::key_type& key, std::uint64_t run) {
   arc::Pose<double> p{0.0, 0.0, 1.0, 0.0, 0.0};
@@ -233,7 +226,7 @@ EndPose reference_run(const Plan& plan, const random::Philox::key_type& key, std
   std::uint32_t n = 0;
   Leg this_run;  // a leg rebuilt for this run's draws (per_run_legs)
   for (std::size_t l = 0; l < plan.legs.size(); ++l) {
-    if (plan.per_run_legs()) this_run = run_leg(plan, l, fx);
+    if (plan.per_run_legs()) this_run = run_leg(plan, l, fx.states.data());
     const Leg& leg = plan.per_run_legs() ? this_run : plan.legs[l];
     for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
       const random::Bits128 b = random::draw(key, run, n, random::kTagWheelNoise);

@@ -67,7 +67,7 @@ struct Plan {
   std::vector<std::uint8_t> event_effects;         // indices into `stochastic` with events
   // Effects whose systematic terms depend on the run's draws (a custom effect's `random:`
   // parameters; indices into `stochastic`): each run rebuilds every leg from its source with
-  // their terms composed in (reference_run, run by run; the legs differ between lanes).
+  // their terms composed in (run_leg; the SIMD kernel loads them per lane).
   std::vector<std::uint8_t> per_run_terms;
   std::vector<LegSource> sources;  // per leg, when per_run_terms is not empty
   Robot robot;
@@ -84,8 +84,15 @@ Plan make_plan(const Robot& robot, const std::vector<SampleRun>& schedule,
                double heading0_rad = 0.0);
 
 /// One run by the scalar reference kernel: plain C++, run by run, what every SIMD target must
-/// match bit for bit (and the kernel of a plan whose legs change per run).
+/// match bit for bit.
 EndPose reference_run(const Plan& plan, const random::Philox::key_type& key, std::uint64_t run);
+
+/// Leg i of a plan whose legs change per run (Plan::per_run_legs) as one run sees it: its source's
+/// terms composed with those of the effects whose terms depend on the run's draws, `states` the
+/// run's RunState of each stochastic effect (indexed as Plan::stochastic; one sin and cos, nothing
+/// allocated). Its draws, operations and count are the path leg's. The reference builds each leg
+/// of a run so; the SIMD kernel builds one per lane into its block's leg table.
+Leg run_leg(const Plan& plan, std::size_t i, const effects::RunState* states);
 
 /// The plan's motion with zero noise (a plan without stochastic effects): the odometry.
 EndPose odometry_run(const Plan& plan);

@@ -96,17 +96,11 @@ struct Simulator::Impl {
     return pose_error(pose, odometry_pose);
   }
 
-  /// The errors of runs first .. first+count-1 (count <= kMaxRuns) by the selected SIMD kernel,
-  /// or run by run by the scalar reference when the legs change per run (their lanes would not
-  /// share a leg).
+  /// The errors of runs first .. first+count-1 (count <= kMaxRuns) by the selected SIMD kernel.
   void run_errors(const random::Philox::key_type& key, std::uint64_t first, std::size_t count,
                   Vector3* out) const {
     std::array<lanes::EndPose, lanes::kMaxRuns> ends;
-    if (plan.per_run_legs()) {
-      for (std::size_t j = 0; j < count; ++j) ends[j] = lanes::reference_run(plan, key, first + j);
-    } else {
-      kernel().run(plan, key, first, count, ends.data());
-    }
+    kernel().run(plan, key, first, count, ends.data());
     for (std::size_t j = 0; j < count; ++j) out[j] = error_of(ends[j]);
   }
 };

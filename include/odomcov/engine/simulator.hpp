@@ -33,7 +33,7 @@ class Simulator {
   /// `effects`: the world's effects. Systematic effects are folded into the path; stochastic
   /// ones (noise correlation, slip, per-run radius, bumps) run in the SIMD lanes too (the
   /// general kernel), each drawing from its own counter streams; a custom effect's random
-  /// parameters rebuild the legs per run (the scalar reference kernel, run by run).
+  /// parameters rebuild the legs per run (per lane, in the same kernel).
   /// `heading0_rad`: the run's start heading in the reference's frame (effects' `heading`;
   /// every run of this simulator starts there).
   Simulator(const Robot& robot, const Path& path, const EffectList& effects = {},
