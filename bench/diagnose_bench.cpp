@@ -5,8 +5,8 @@
 //  * BM_DiagnoseRound: one diagnose round from the plain model (13 candidates, two of them
 //    group_variation's: the imported sessions are groups);
 //  * BM_Fit: the joint fit of Ed and Eb;
-//  * BM_Loop: the diagnose loop (scripts/diagnose_loop.py's, in the library): diagnose, adopt
-//    the best candidate, repeat until nothing is significant or 8 rounds (fast path only).
+//  * BM_Calibrate: odomcov calibrate on every run (cross-validation included): diagnose
+//    rounds, adoption, the joint fit, confounded pairs and next experiments (fast path only).
 // Each on the fast path (FitPath::fast: linearised, re-anchored) and, with
 // ODOMCOV_BENCH_EXACT=1 in the environment, the exact one (~40 s CPU per round). The counter
 // `propagations` is the number of exact likelihood evaluations per iteration.
@@ -19,6 +19,7 @@
 #include <fstream>
 #include <unistd.h>
 
+#include "odomcov/measurement/calibrate.hpp"
 #include "odomcov/measurement/calibration.hpp"
 #include "odomcov/measurement/diagnosis.hpp"
 #include "odomcov/io/optiodom.hpp"
@@ -88,31 +89,28 @@ void BM_DiagnoseRound(benchmark::State& state) {
   state.counters["runs"] = static_cast<double>(runs(suite));
 }
 
-/// The library loop of scripts/diagnose_loop.py: diagnose, adopt the best candidate's model,
-/// repeat until no candidate is significant (or kLoopRounds rounds). Counters: rounds done,
-/// propagations in all, the NEES mean of the final model.
-constexpr int kLoopRounds = 8;
-
-void BM_Loop(benchmark::State& state) {
+/// odomcov calibrate in the library: diagnose rounds with cross-validation over the four path
+/// types (each finalist refitted on each fold's complement), adoption, the joint fit, the
+/// confounded pairs and the next experiments. Counters: rounds, propagations in all, the NEES
+/// mean of the final model, the effects named.
+void BM_Calibrate(benchmark::State& state) {
   const odomcov::Suite& suite = optiodom();
-  double rounds = 0, propagations = 0, nees = 0;
+  double rounds = 0, propagations = 0, nees = 0, named = 0;
   for (auto _ : state) {
-    odomcov::SuiteModel model = odomcov::suite_model(suite);
+    odomcov::CalibrateOptions options;
+    options.diagnose.path = path_of(state);
     odomcov::DiagnoseProgress progress;
-    int round = 0;
-    for (; round < kLoopRounds; ++round) {
-      const odomcov::Diagnosis d = odomcov::diagnose(suite, model, odomcov::kDiagnoseAlpha, {},
-                                                     &progress, {}, path_of(state));
-      nees = d.after.nees_mean;
-      if (!d.best) break;
-      model = d.candidates[*d.best].model;
-    }
-    rounds = round + (round < kLoopRounds ? 1 : 0);  // the last round names nothing
+    const odomcov::Calibration c =
+        odomcov::calibrate(suite, odomcov::suite_model(suite), options, nullptr, &progress);
+    rounds = static_cast<double>(c.rounds.size());
     propagations = static_cast<double>(progress.evaluations.load());
+    nees = c.after.nees_mean;
+    named = static_cast<double>(c.named.size());
   }
   state.counters["rounds"] = rounds;
   state.counters["propagations"] = propagations;
   state.counters["nees"] = nees;
+  state.counters["named"] = named;
 }
 
 void BM_Fit(benchmark::State& state) {
@@ -135,7 +133,7 @@ const bool kExact = std::getenv("ODOMCOV_BENCH_EXACT") != nullptr;
 
 BENCHMARK(BM_Likelihood)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
 BENCHMARK(BM_DiagnoseRound)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
-BENCHMARK(BM_Loop)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
+BENCHMARK(BM_Calibrate)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
 BENCHMARK(BM_Fit)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 const bool kRegistered = kExact && [] {
   benchmark::RegisterBenchmark("BM_DiagnoseRound/exact", [](benchmark::State& s) { BM_DiagnoseRound(s); })

@@ -53,12 +53,19 @@ std::string comparison_text(const Suite& suite, const Comparison& c) {
         << "): " << test_text(e.cov_test) << "\n  NEES mean " << fixed(e.nees_mean, 3)
         << " (expected 3), outside the 95% bound: " << fixed(100 * e.outside_95, 1)
         << "%, log-likelihood " << fixed(e.log_likelihood, 2) << "\n";
+    for (const std::string& x : e.extrapolation) out << "  outside the model's training domain: " << x << "\n";
   }
   out << "\nSuite: log-likelihood " << fixed(c.log_likelihood, 2) << "; Mardia kurtosis "
       << (c.kurtosis.valid ? fixed(c.mardia_b2, 2) + " (Gaussian " + fixed(c.mardia_expected, 2) +
                                  "), p = " + sci(c.kurtosis.p_value, 2)
                            : std::string("n/a (no experiment has 10 runs)"))
       << "\nverdict: " << c.verdict << "\n";
+  std::size_t outside = 0;
+  for (const ExperimentComparison& e : c.experiments) outside += e.extrapolation.empty() ? 0 : 1;
+  if (outside > 0) {
+    out << "The model extrapolates: " << outside << " of " << c.experiments.size()
+        << " experiments lie outside the domain it was calibrated on (listed above).\n";
+  }
   if (!c.failures.empty()) {
     out << "Where it fails (worst first):\n";
     for (const std::string& f : failure_texts(c)) out << "  - " << f << "\n";
@@ -82,6 +89,7 @@ json comparison_json(const Suite& suite, const Comparison& c) {
                            {"outside_95", e.outside_95},
                            {"log_likelihood", e.log_likelihood},
                            {"verdict", e.verdict.name()},
+                           {"extrapolation", e.extrapolation},
                            {"errors", errors}});
   }
   json kurtosis = test_json(c.kurtosis);

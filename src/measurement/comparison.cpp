@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 
+#include "odomcov/measurement/domain.hpp"
 
 namespace odomcov {
 namespace {
@@ -313,6 +314,9 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
   }
   kurtosis_test(pool, tails_expected, kurtosis_ratio, out);
   verdict_and_failures(out, tails_expected);
+  for (std::size_t e = 0; model.domain && e < suite.experiments.size(); ++e) {
+    out.experiments[e].extrapolation = extrapolation(*model.domain, suite.experiments[e], model.robot.wheelbase_m);
+  }
   return out;
 }
 

@@ -24,6 +24,7 @@ class FeatureAccumulator {
     const double travel = 0.5 * (std::abs(piece.left_m) + std::abs(piece.right_m));
     const double dtheta = (piece.right_m - piece.left_m) / B_;
     f_.distance_m += travel;
+    f_.duration_s += duration_s;
     f_.angle_turned_rad += dtheta;
     abs_turn_ += std::abs(dtheta);
     spin_ += std::abs(piece.right_m - piece.left_m);

@@ -31,6 +31,9 @@ struct ExperimentComparison {
   Vector3 mean_p = Vector3::Ones();        // Student-t p-values
   Vector3 variance_ratio = Vector3::Ones();  // measured / predicted variance
   Vector3 variance_p = Vector3::Ones();    // chi^2 p-values (two-sided)
+  /// With a model that records its training domain (SuiteModel::domain): where this
+  /// experiment's runs lie outside it, in words (extrapolation()); empty inside.
+  std::vector<std::string> extrapolation;
 
   /// Correlation of components a and b (0 x, 1 y, 2 theta), measured and predicted.
   double measured_correlation(int a, int b) const;

@@ -21,6 +21,7 @@ struct PathFeatures {
   double travel_direction = 0.0;  // sum d / sum |d| of the centre travel: +1 forwards, -1 backwards
   double reversals = 0.0;         // reversals of either wheel's direction (5 mm hysteresis)
   double speed_mps = 0.0;         // mean wheel speed, weighted by the distance driven at it
+  double duration_s = 0.0;        // the run's duration: sum of its pieces' durations
 };
 
 /// The features of a run: planned paths from their keyframe intervals (constant wheel speeds,
