@@ -116,7 +116,7 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
       const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects,
                                        target, p.mean, &p.odometry_end_pose);
       out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
-                   p.cov + meas, g.column, group, g.column2};
+                   p.cov + meas, g.column, group, g.column2, p.noise_mean};
       return;
     }
     std::vector<double> durations;
@@ -129,7 +129,7 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     const Vector3 odometry = sampled_end_pose(ex.path, B);
     for (std::size_t i = 0; i < ex.runs.size(); ++i) {
       out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean + g.shift,
-                   p.cov + meas, g.column, group, g.column2};
+                   p.cov + meas, g.column, group, g.column2, p.noise_mean};
     }
   }, tbb::simple_partitioner());
   return out;
