@@ -188,6 +188,7 @@ json diagnosis_json(const Suite& suite, const SuiteModel& model, const Diagnosis
   json residuals = json::array();
   for (const ResidualAlignment& a : d.residuals) {
     residuals.push_back({{"feature", a.feature},
+                         {"part", a.part},
                          {"p_value", a.testable ? json(a.p_value) : json(nullptr)},
                          {"p_value_raw", a.testable ? json(a.p_value_raw) : json(nullptr)},
                          {"statistic", a.testable ? json(a.statistic) : json(nullptr)},

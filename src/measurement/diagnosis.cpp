@@ -523,12 +523,14 @@ std::string verdict_text(const Diagnosis& d) {
     if (!a.testable || shown == 3) break;
     if (shown == 0) {
       text += a.p_value < d.alpha
-                  ? "The remaining misfit lines up with (p family-wise over the features):\n"
+                  ? "The remaining misfit lines up with (mean: the experiments' mean errors; scatter: their "
+                    "spread; p family-wise over the features and parts):\n"
                   : "The remaining misfit lines up with no path feature at alpha; the closest "
-                    "(p family-wise over the features):\n";
+                    "(p family-wise over the features and parts):\n";
     }
     if (shown > 0 && !(a.p_value < d.alpha)) break;
-    text += "  " + a.feature + " (p = " + format_number(a.p_value, "%.2g") + "): " + a.description + "\n";
+    text += "  " + a.feature + ", " + a.part + " (p = " + format_number(a.p_value, "%.2g") + "): " +
+            a.description + "\n";
     ++shown;
   }
   if (shown == 0) text += "No path feature varies across the experiments enough to test.\n";
