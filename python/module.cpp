@@ -298,6 +298,7 @@ py::dict diagnose_py(const Suite& suite, double alpha, const std::vector<std::st
   for (const ResidualAlignment& r : dg.residuals) {
     py::dict a;
     a["feature"] = r.feature;
+    a["part"] = r.part;
     a["p_value"] = r.p_value;
     a["description"] = r.description;
     residuals.append(a);

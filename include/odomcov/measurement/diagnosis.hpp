@@ -58,6 +58,7 @@ struct ModelSummary {
   double log_likelihood = 0.0;
   double nees_mean = 0.0;  // over all runs
   std::string verdict;     // compare's, at the same alpha
+  Calibration calibration;  // how compare calibrated that verdict
 };
 
 struct Candidate {
@@ -130,9 +131,12 @@ struct DiagnoseProgress {
 /// `path` is how every fit evaluates the likelihood (FitPath): the fast path shares one
 /// ResidualCache over the round, so each candidate parameter's sensitivity around the refitted
 /// model is propagated once.
+/// `calibration` is how the compares of the model before and after calibrate their verdicts
+/// (compare; the referee's seed and replicates).
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
                    const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr,
-                   const EffectList& candidates = {}, FitPath path = FitPath::fast);
+                   const EffectList& candidates = {}, FitPath path = FitPath::fast,
+                   const CalibrationOptions& calibration = {});
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts
