@@ -613,8 +613,6 @@ std::vector<double> row_minima(const ScoreTable& t, const Reference& ref, const 
 
 /// Resampling risk per look: each look's Clopper-Pearson interval has level 1 - kRiskPerLook.
 constexpr double kRiskPerLook = 1e-3;
-/// The tail model decides a verdict the replicates cannot resolve only this far beyond alpha.
-constexpr double kTailMargin = 0.1;
 
 /// The family-wise p-value of a p-value `p` among the replicates' minima (sorted, rows 1..B):
 /// (1 + k)/(B + 1) with k the replicates at or below it; when none is, the tail model
@@ -649,7 +647,9 @@ bool look(const std::vector<double>& minima, int tests, double alpha, Calibratio
   cal.p_mc_error = std::sqrt(k / B * (1 - k / B) / B);
   ++cal.looks;
   if (cal.p_interval[1] < alpha || cal.p_interval[0] > alpha) return true;
-  return cal.beyond_replicates && cal.p_value <= kTailMargin * alpha;
+  // Beyond every replicate the tail model decides: conservative (an exponential tail at the
+  // lightest), it errs towards continuing.
+  return cal.beyond_replicates && cal.p_value <= alpha;
 }
 
 /// Simulates replicates [first, last) of the model's world and appends their scores.
@@ -698,6 +698,18 @@ void calibrate_tests(const ScoreTable& table, const Reference& ref, const TestLa
                                     : std::min(alpha / K, sorted.front());
 }
 
+/// The look after B replicates: B + 1 doubled, and a look at B + 1 = 1/alpha (rounded up), the
+/// first B at which the Monte-Carlo test can reject with no replicate beyond the data; at most
+/// `cap`.
+std::int64_t next_look(std::int64_t B, std::int64_t cap, double alpha) {
+  std::int64_t next = std::min(cap, 2 * (B + 1) - 1);
+  const double resolving = std::ceil(1.0 / alpha - 1e-9) - 1.0;
+  if (static_cast<double>(B) < resolving && resolving < static_cast<double>(next)) {
+    next = static_cast<std::int64_t>(resolving);
+  }
+  return next;
+}
+
 /// Calibrates `out`'s tests by the model's world (ModelWorld): looks after 99, 199, 399, ...
 /// replicates until the verdict at alpha is decided or B reaches the cap. Returns the kurtosis
 /// score's median in the model's world (0 for a Gaussian world).
@@ -727,7 +739,7 @@ double referee(const Suite& suite, const SuiteModel& model, const Prepared& p, c
       cal.close_call = !decided;
       break;
     }
-    next = std::min(cap, 2 * (B + 1) - 1);
+    next = next_look(B, cap, out.alpha);
   }
   calibrate_tests(table, ref, layout, sorted, out.alpha, out);
   return ref.median[2 * out.experiments.size()];
