@@ -1,6 +1,8 @@
 // The odomcov Python module (pybind11). NumPy arrays in and out; dicts shaped like the CLI's
 // JSON (docs/library.md). Frames and units as everywhere in odomcov (docs/conventions.md).
 #include <pybind11/eigen.h>
+
+#include <cmath>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -62,12 +64,13 @@ Array stack3(std::size_t n, Get get) {
 }
 
 py::dict predict_py(const Array& left, const Array& right, double wheelbase, double k_left,
-                    double k_right, const py::object& effects, const py::object& t) {
+                    double k_right, const py::object& effects, const py::object& t, double heading0) {
   if (left.ndim() != 1 || right.ndim() != 1 || left.size() != right.size() || left.size() < 1) {
     throw py::value_error("left and right must be 1-D arrays of the same length >= 1");
   }
   if (!(wheelbase > 0)) throw py::value_error("wheelbase must be > 0");
   if (!(k_left >= 0) || !(k_right >= 0)) throw py::value_error("k_left and k_right must be >= 0");
+  if (!std::isfinite(heading0)) throw py::value_error("heading0 must be finite");
   const auto l = left.unchecked<1>();
   const auto r = right.unchecked<1>();
   const std::size_t n = static_cast<std::size_t>(left.size());
@@ -104,7 +107,7 @@ py::dict predict_py(const Array& left, const Array& right, double wheelbase, dou
     out["cov"] = stack3x3(n, [&](std::size_t i) { return cov[i]; });
     out["mean"] = stack3(n, [](std::size_t) { return Vector3::Zero().eval(); });
   } else {  // the propagation engine with the model's effects
-    const std::vector<Prediction> p = predict_trajectory(pieces, durations, robot, list);
+    const std::vector<Prediction> p = predict_trajectory(pieces, durations, robot, list, heading0);
     out["pose"] = stack3(n, [&](std::size_t i) { return p[i].odometry_end_pose; });
     out["cov"] = stack3x3(n, [&](std::size_t i) { return p[i].cov; });  // exactly symmetric
     out["mean"] = stack3(n, [&](std::size_t i) { return p[i].mean; });
@@ -280,12 +283,12 @@ py::object calibrate_py(const Suite& suite, double alpha, int rounds, const py::
   SuiteModel start = suite_model(suite);
   start.order = order;
   const Suite* held = holdout.is_none() ? nullptr : &holdout.cast<const Suite&>();
-  Calibration c;
+  CalibrateResult c;
   {
     py::gil_scoped_release release;
     c = calibrate(suite, start, options, held);
   }
-  py::object out = to_python(cli::calibration_json(suite, start, c, alpha));
+  py::object out = to_python(cli::calibrate_json(suite, start, c, alpha));
   out["diff_drive_yaml"] = cli::diff_drive_yaml(suite, c.diff_drive);
   return out;
 }
@@ -299,13 +302,15 @@ PYBIND11_MODULE(_odomcov, m) {
 
   m.def("predict", &predict_py, py::arg("left"), py::arg("right"), py::arg("wheelbase"),
         py::arg("k_left"), py::arg("k_right"), py::arg("effects") = py::none(), py::arg("t") = py::none(),
+        py::arg("heading0") = 0.0,
         R"(Pose and first-order covariance along an encoder log.
 
 left, right: cumulative wheel travel [m] per sample, arrays of length N starting at 0.
 wheelbase [m], k_left, k_right [m^(1/2)]: the robot. effects: optional model effects, as a
 config's effects list: [{"wheel_diameter_ratio": {"Ed": 1.004}}, {"custom": {...}}, ...].
 t: optional sample times [s], length N, strictly increasing: effects that depend on the speed
-(v) or the time (t) need them.
+(v), the time (t) or the acceleration (a) need them. heading0: the run's start heading in the
+reference's frame [rad], which custom effects' `heading` starts from (default 0).
 Returns {"pose": (N, 3) odometry poses (x, y, theta) in the start frame, "cov": (N, 3, 3)
 covariance of the error true - odometry in the start (world) frame, "mean": (N, 3) the
 effects' systematic mean error}. Without effects this is the closed form [Kleeman95] per

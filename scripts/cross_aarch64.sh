@@ -13,6 +13,7 @@ sysroot="$out/sysroot"
 host_packages=(g++-aarch64-linux-gnu qemu-user)
 arm_packages=(libtbb-dev libtbb12 libtbbmalloc2 libtbbbind-2-5 libhwloc15 libyaml-cpp-dev libyaml-cpp0.7
               libnlopt-dev libnlopt-cxx-dev libnlopt-cxx0 libnlopt0 libmuparser-dev libmuparser2v5
+              libhwy-dev libhwy1
               libgtest-dev libgmock-dev)
 
 sudo_cmd=()
@@ -32,7 +33,8 @@ if [ ${#missing[@]} -gt 0 ] || [ $need_update -eq 1 ]; then
   [ ${#missing[@]} -eq 0 ] || "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
-if [ ! -f "$sysroot/.complete" ]; then
+# The sysroot is kept between runs; it is made again when the package list changes.
+if [ "$(cat "$sysroot/.complete" 2>/dev/null)" != "${arm_packages[*]}" ]; then
   rm -rf "$sysroot" "$out/debs"
   mkdir -p "$sysroot" "$out/debs"
   (cd "$out/debs" && apt-get download -qq "${arm_packages[@]/%/:arm64}" 2>/dev/null)
@@ -41,7 +43,7 @@ if [ ! -f "$sysroot/.complete" ]; then
   mkdir -p "$sysroot/host-headers"
   ln -sfn /usr/include/boost "$sysroot/host-headers/boost"
   ln -sfn /usr/include/Random123 "$sysroot/host-headers/Random123"
-  touch "$sysroot/.complete"
+  echo "${arm_packages[*]}" > "$sysroot/.complete"
 fi
 
 cmake -S "$root" -B "$out/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \

@@ -202,7 +202,10 @@ def _render(head, effects, tail, experiments, speeds, prefixes):
     for speed, prefix in zip(speeds, prefixes):
         for name, runs, segments, *group in experiments:
             path = f"{{sample_rate: 50, speed: {speed}, segments: [{segments}]}}"
-            lines.extend([f"  - name: {prefix}{name}", f"    runs: {runs}"]
+            # The kind (the folds of calibrate's cross-validation) is the path's, not the
+            # speed's or the group's prefix.
+            lines.extend([f"  - name: {prefix}{name}", f"    kind: {name.split('-')[1] if group else name.split('-')[0]}",
+                          f"    runs: {runs}"]
                          + [f"    group: {g}" for g in group] + [f"    path: {path}"])
     return "\n".join(lines) + "\n"
 
@@ -570,6 +573,20 @@ def rates_of(results):
     return rates
 
 
+# The level of --check's allowance for right models that compare rejects (binomial_allowance).
+CHECK_LEVEL = 0.001
+
+
+def binomial_allowance(n, p, level):
+    """The smallest k with P(Binomial(n, p) > k) < level."""
+    k, cdf, term = 0, (1 - p) ** n, (1 - p) ** n
+    while 1 - cdf >= level and k < n:
+        term *= (n - k) / (k + 1) * p / (1 - p)
+        k += 1
+        cdf += term
+    return k
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--odomcov", required=True)
@@ -611,10 +628,16 @@ def main():
             json.dump({"seed": args.seed, "rates": rates, "worlds": results}, f, indent=1)
     if args.check:
         bad = [r for r in results if not r["identified"] or r["recovered"] is False
-               or (r["hidden"] and r["consistent"] is False)
                or (r["hidden"] and r["consistent"] is None and not any(h in OPEN for h in r["hidden"]))]
-        if bad:
-            print(f"FAIL: {len(bad)} world(s) not diagnosed right", file=sys.stderr)
+        # "Consistent after" is compare's verdict at alpha = 0.01: a right model fails it in 1% of
+        # worlds. Allowed: the most inconsistent right models that Binomial(judged, 0.01) reaches
+        # with probability >= 0.001 (2 of 17 judged worlds).
+        judged = [r for r in results if r["hidden"] and r["consistent"] is not None]
+        rejected = [r for r in judged if r["consistent"] is False]
+        allowed = binomial_allowance(len(judged), rates["alpha"], CHECK_LEVEL)
+        if bad or len(rejected) > allowed:
+            print(f"FAIL: {len(bad)} world(s) not diagnosed right; {len(rejected)} right model(s) inconsistent "
+                  f"(at most {allowed} of {len(judged)} allowed at level {CHECK_LEVEL})", file=sys.stderr)
             return 1
     return 0
 

@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
   cmake ninja-build g++ pkg-config
   libeigen3-dev libtbb-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
-  libboost-math-dev librandom123-dev libnlopt-cxx-dev libmuparser-dev
+  libboost-math-dev librandom123-dev libnlopt-cxx-dev libmuparser-dev libhwy-dev
   libgtest-dev libbenchmark-dev clang-tidy
   python3-matplotlib python3-numpy
   pybind11-dev python3-pybind11 python3-dev python3-pytest

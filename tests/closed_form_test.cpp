@@ -13,6 +13,7 @@
 
 #include "odomcov/closed_form/path.hpp"
 #include "base/quadrature.hpp"
+#include "closed_form/arc_functions.hpp"
 #include "test_util.hpp"
 
 namespace odomcov {
@@ -270,6 +271,113 @@ TEST(ClosedForm, ErrorEllipse) {
   EXPECT_NEAR(e.angle_rad, M_PI / 6, 1e-14);
   p.topLeftCorner<2, 2>() = Eigen::Vector2d(1.0, 4.0).asDiagonal();
   EXPECT_NEAR(error_ellipse(p).angle_rad, M_PI / 2, 1e-15);  // (-pi/2, pi/2]
+}
+
+// ---- Lateral slip (effects' Systematic::lateral): a piece of centre travel d, heading change a
+// and lateral slip l moves by (d + i l) U(a), U(a) = (e^{ia} - 1)/(ia), in its start frame.
+
+/// The piece's end pose in its start frame, straight from the definition (std::sin/cos).
+Vector3 lateral_displacement(double d, double l, double a) {
+  if (a == 0.0) return {d, l, 0.0};
+  const double s = std::sin(a), c1 = 1.0 - std::cos(a);
+  return {(d * s - l * c1) / a, (d * c1 + l * s) / a, a};
+}
+
+/// Q of a piece with a lateral slip by composite Gauss-Legendre: with v the fraction still to go,
+/// the end error per unit heading noise is (a_d(v) - b_l(v), b_d(v) + a_l(v)), a_x(v) =
+/// x (1 - cos av)/a, b_x(v) = x sin(av)/a, and per unit along-track noise (cos av, -sin av).
+Matrix3 quadrature_lateral_covariance(double d, double l, double a, const Matrix2& N) {
+  static const auto rule = gauss_legendre_01<20>();
+  const int panels = 64;
+  Matrix3 sum = Matrix3::Zero();
+  for (int p = 0; p < panels; ++p) {
+    for (const auto& [x, w] : rule) {
+      const double v = (p + x) / panels, av = a * v;
+      const double one_minus_cos = a == 0.0 ? 0.0 : 2.0 * std::sin(0.5 * av) * std::sin(0.5 * av) / a;
+      const double sine = a == 0.0 ? v : std::sin(av) / a;
+      Matrix32 psi;
+      psi << d * one_minus_cos - l * sine, std::cos(av), d * sine + l * one_minus_cos, -std::sin(av), 1.0, 0.0;
+      sum += (w / panels) * psi * N * psi.transpose();
+    }
+  }
+  return sum;
+}
+
+TEST(ClosedFormLateral, ZeroSlipIsTheKernelsBitForBit) {
+  std::mt19937_64 rng(60);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 100; ++trial) {
+    const double d = 3 * u(rng), a = trial % 2 ? 1e-3 * u(rng) : 3 * u(rng);
+    const detail::ArcFunctions f(a);
+    const Matrix2 N = Matrix2::Identity() * (1 + u(rng) * u(rng));
+    EXPECT_EQ(detail::arc_noise_covariance(d, 0.0, f, N), detail::arc_noise_covariance(d, f, N));
+    EXPECT_EQ(detail::arc_transition(d, 0.0, f), detail::arc_transition(d, f));
+    EXPECT_EQ(detail::arc_displacement(d, 0.0, f), detail::arc_displacement(d, f));
+    const Matrix3 g = detail::arc_input_gain(d, 0.0, f);
+    EXPECT_EQ(Matrix32(g.leftCols<2>()), detail::arc_input_gain(d, f));
+  }
+}
+
+TEST(ClosedFormLateral, DisplacementIsTheDefinitionAndSplitsExactly) {
+  // (d + i l) U(a): the kernel against the definition, and n equal parts composed give the
+  // whole piece (the slip accumulates along the arc as the travel does).
+  std::mt19937_64 rng(61);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 200; ++trial) {
+    const double d = 3 * u(rng), l = 0.5 * u(rng), a = 4 * u(rng);
+    const Vector3 whole = detail::arc_displacement(d, l, detail::ArcStep(a));
+    EXPECT_LT((whole - lateral_displacement(d, l, a)).norm(), 1e-14 * (1 + std::abs(d) + std::abs(l)));
+    const int n = 2 + trial % 9;
+    Vector3 parts = Vector3::Zero();
+    for (int k = 0; k < n; ++k) parts = compose(parts, detail::arc_displacement(d / n, l / n, detail::ArcStep(a / n)));
+    EXPECT_LT((parts - whole).norm(), 1e-13 * (1 + std::abs(d) + std::abs(l))) << "n = " << n;
+  }
+}
+
+TEST(ClosedFormLateral, NoiseIntegralMatchesQuadrature) {
+  std::mt19937_64 rng(62);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 300; ++trial) {
+    const double d = 5 * u(rng), l = 2 * u(rng);
+    const double a = trial % 3 == 0 ? 1e-3 * u(rng) : 4 * M_PI * u(rng);
+    Eigen::Matrix2d L;
+    L << u(rng), 0, u(rng), u(rng);
+    const Matrix2 N = L * L.transpose();
+    EXPECT_LT(max_rel_diff(detail::arc_noise_covariance(d, l, detail::ArcFunctions(a), N),
+                           quadrature_lateral_covariance(d, l, a, N)),
+              1e-12)
+        << "d = " << d << ", l = " << l << ", a = " << a;
+  }
+}
+
+TEST(ClosedFormLateral, TransitionAndInputGainAreFirstOrderPerturbations) {
+  // Phi: perturb the start (tangential) and drive the same piece exactly. The gain: a heading
+  // rate, a travel and a slip error spread uniformly over the piece are the piece with
+  // (a + e_theta, d + e_d, l + e_l); the end error is the gain times (e_theta, e_d, e_l).
+  std::mt19937_64 rng(63);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 200; ++trial) {
+    const double d = 3 * u(rng), l = u(rng), a = 3 * u(rng);
+    const Vector3 start{u(rng), u(rng), M_PI * u(rng)};
+    const Vector3 direction(u(rng), u(rng), u(rng));
+    const detail::ArcFunctions f(a);
+    const Matrix3 phi = detail::arc_transition(d, l, f), gain = detail::arc_input_gain(d, l, f);
+    const Vector3 nominal = compose(start, lateral_displacement(d, l, a));
+    auto transition_residual = [&](double h) {
+      const Vector3 w = h * direction;
+      Vector3 perturbed = start;
+      perturbed.head<2>() += world_from_tangential(start.z()).topLeftCorner<2, 2>() * w.head<2>();
+      perturbed.z() += w.z();
+      return (tangential_error(compose(perturbed, lateral_displacement(d, l, a)), nominal) - phi * w).norm();
+    };
+    auto gain_residual = [&](double h) {
+      const Vector3 e = h * direction;
+      const Vector3 moved = compose(start, lateral_displacement(d + e.y(), l + e.z(), a + e.x()));
+      return (tangential_error(moved, nominal) - gain * e).norm();
+    };
+    expect_second_order_residual(transition_residual(1e-4), transition_residual(1e-5), 7.0);
+    expect_second_order_residual(gain_residual(1e-4), gain_residual(1e-5), 7.0);
+  }
 }
 
 }  // namespace

@@ -8,7 +8,9 @@
 
 #include <boost/math/distributions/normal.hpp>
 #include <cmath>
+#include <cstring>
 #include <random>
+#include <string>
 
 #include "odomcov/engine/propagation.hpp"
 #include "test_util.hpp"
@@ -151,20 +153,107 @@ TEST(Simulator, StochasticEffectsSameBitsForAnyThreadCount) {
   EXPECT_EQ(sim.errors(17, 100, 7, 1), sim.errors(17, 100, 7, 3));
 }
 
+/// Runs `body` once per SIMD target this build has and this CPU runs, that target selected;
+/// the best target is selected again afterwards.
+template <class F>
+void for_each_kernel(F&& body) {
+  for (const std::string& target : Simulator::kernel_targets()) {
+    Simulator::select_kernel(target);
+    SCOPED_TRACE("kernel " + target);
+    body(target);
+  }
+  Simulator::select_kernel("");
+}
+
+// The stochastic effects run in the SIMD lanes too: every target, 1, 2 and 7 threads, with
+// per-run draws (per_run_radius), per-sample draws (turn_slip), events (bumps), a noise mix
+// (correlation) and a systematic effect folded into the legs.
+TEST(Simulator, EveryKernelWithEffectsSameBitsFor1To7Threads) {
+  const Path path{50.0, {{0, 0, 0}, {2, 2, 2}, {3, 1.6073, 2.3927}, {4, 3.5708, 3.5708}}};
+  const EffectList effects{{"wheel_diameter_ratio", {1.004}}, {"turn_slip", {0.002}},
+                           {"per_run_radius", {0.003}}, {"bumps", {2.0, 0.004}},
+                           {"wheel_noise_correlation", {0.4}}};
+  const Simulator sim({0.5, {1e-3, 2e-3}}, path, effects);
+  Simulator::select_kernel("");
+  const MomentAccumulator reference = sim.simulate(1003, 23, 1);
+  const std::vector<Vector3> errors = sim.errors(23, 40, 77, 1);
+  for_each_kernel([&](const std::string&) {
+    for (int threads : {1, 2, 7}) {
+      const MomentAccumulator m = sim.simulate(1003, 23, threads);
+      EXPECT_EQ(m.count(), 1003);
+      EXPECT_EQ(m.mean(), reference.mean()) << threads << " threads";
+      EXPECT_EQ(m.scatter(), reference.scatter()) << threads << " threads";
+      EXPECT_EQ(sim.errors(23, 40, 77, threads), errors) << threads << " threads";
+    }
+  });
+}
+
+// The seed -> numbers mapping (src/base/random.hpp, docs/performance.md) pinned: the bits of
+// three runs without and with effects, the same on every instruction set and architecture (the
+// aarch64 build checks them under qemu).
+TEST(Simulator, SeedGivesTheDocumentedBits) {
+  const Path path{50.0, {{0, 0, 0}, {2, 2, 2}, {3, 1.6073, 2.3927}, {4, 3.5708, 3.5708}}};
+  const Robot robot{0.5, {1e-3, 2e-3}};
+  const EffectList effects{{"wheel_diameter_ratio", {1.004}}, {"turn_slip", {0.002}},
+                           {"per_run_radius", {0.003}}, {"bumps", {2.0, 0.004}},
+                           {"wheel_noise_correlation", {0.4}}};
+  const std::uint64_t expected[2][3][3] = {
+      {{0xbf72dd1991d55e00ull, 0x3f885b41e0d5c780ull, 0x3f73b11ddf4623fcull},
+       {0x3f7bb80ab4cca600ull, 0xbf904e2426fbefc0ull, 0xbf73ca0bedd4f7f8ull},
+       {0xbf8e1437cb89ee00ull, 0x3f990be6092507c0ull, 0x3f87e06b052d6edcull}},
+      {{0xbfa237ec6fdbad40ull, 0x3fb509b13ae92eb0ull, 0x3fac2ecc5ffb9d23ull},
+       {0xbfa4b0b9774acd40ull, 0x3fadd0901407a5e0ull, 0x3fab4424c9947e22ull},
+       {0xbfb111b5464096e0ull, 0x3fbf58d862577520ull, 0x3fb77cf8cddf65d7ull}}};
+  for_each_kernel([&](const std::string&) {
+    for (int with : {0, 1}) {
+      const Simulator sim(robot, path, with ? effects : EffectList{});
+      const std::vector<Vector3> e = sim.errors(42, 1000, 3, 1);
+      for (int r = 0; r < 3; ++r) {
+        for (int i = 0; i < 3; ++i) {
+          std::uint64_t bits;
+          const double v = e[static_cast<std::size_t>(r)][i];
+          std::memcpy(&bits, &v, sizeof bits);
+          EXPECT_EQ(bits, expected[with][r][i]) << (with ? "effects" : "plain") << ", run " << r;
+        }
+        EXPECT_EQ(sim.reference_error(42, 1000 + r), e[static_cast<std::size_t>(r)]);
+      }
+    }
+  });
+}
+
+TEST(Simulator, SelectKernelNamesOnlyCompiledTargets) {
+  const std::vector<std::string> targets = Simulator::kernel_targets();
+  ASSERT_FALSE(targets.empty());
+  EXPECT_EQ(std::string(Simulator::kernel_isa()), targets.front());
+  EXPECT_THROW(Simulator::select_kernel("no such target"), std::invalid_argument);
+  Simulator::select_kernel(targets.back());
+  EXPECT_EQ(std::string(Simulator::kernel_isa()), targets.back());
+  Simulator::select_kernel("");
+  EXPECT_EQ(std::string(Simulator::kernel_isa()), targets.front());
+}
+
 TEST(Simulator, VectorKernelMatchesScalarReferenceBitForBit) {
   // Includes lanes that leave the series bounds: large noise (|eps| > 0.05), a 2 Hz sample
   // rate on a fast spin (|h| > 0.45 per sample, division branch) and wheel reversals.
-  std::mt19937_64 rng(6);
-  for (int trial = 0; trial < 12; ++trial) {
-    test::RandomCase c = test::random_case(rng, trial % 3 == 0 ? 2.0 : 60.0);
-    if (trial % 2 == 0) c.robot.noise = {0.15, 0.2};
-    const Simulator sim(c.robot, c.path);
-    const std::vector<Vector3> fast = sim.errors(7, 1000, 24);
-    for (std::int64_t r = 0; r < 24; ++r) {
-      EXPECT_EQ(fast[static_cast<std::size_t>(r)], sim.reference_error(7, 1000 + r))
-          << "trial " << trial << ", run " << r;
+  // Every compiled target (x86-64: AVX-512, AVX2, SSE4 and the scalar fallback; aarch64: NEON),
+  // plain and with every stochastic effect (odd trials), 37 runs: blocks of every width end
+  // part-filled.
+  const EffectList effects{{"per_run_radius", {0.003}}, {"turn_slip", {0.01}},
+                           {"bumps", {3.0, 0.004}}, {"wheel_noise_correlation", {-0.6}},
+                           {"backlash", {0.002, 0.001}}};
+  for_each_kernel([&](const std::string&) {
+    std::mt19937_64 rng(6);
+    for (int trial = 0; trial < 12; ++trial) {
+      test::RandomCase c = test::random_case(rng, trial % 3 == 0 ? 2.0 : 60.0);
+      if (trial % 2 == 0) c.robot.noise = {0.15, 0.2};
+      const Simulator sim(c.robot, c.path, trial % 2 == 1 ? effects : EffectList{});
+      const std::vector<Vector3> fast = sim.errors(7, 1000, 37);
+      for (std::int64_t r = 0; r < 37; ++r) {
+        EXPECT_EQ(fast[static_cast<std::size_t>(r)], sim.reference_error(7, 1000 + r))
+            << "trial " << trial << ", run " << r;
+      }
     }
-  }
+  });
 }
 
 // A logged run is simulated one sample per encoder piece: given the pieces of a path's own

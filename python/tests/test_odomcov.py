@@ -143,3 +143,27 @@ def test_calibrate_gives_calibrate_json():
         odomcov.calibrate(suite, rounds=0)
     with pytest.raises(ValueError):
         odomcov.calibrate(suite, candidates=[{"custom": {"name": "x", "parameters": {"a": 0}, "scale": "1 + b"}}])
+def test_predict_takes_the_languages_new_keys():
+    # lateral, noise and random (a per-run parameter with its sd) through the configs' own
+    # parser, and the start heading for `heading`: a slip to the left of 4 mm per metre on a
+    # straight line ends 4 mm per metre to the left; a slope (lateral = -g cos(heading)) gives
+    # the same at heading0 = pi and the opposite at 0; the per-run scale adds (sd L)^2 along x.
+    t = np.linspace(0, 10, 501)
+    left = right = 0.5 * t  # 5 m at 0.5 m/s
+    drift = odomcov.predict(left, right, 0.4, 1e-3, 1e-3,
+                            effects=[{"custom": {"name": "drift", "parameters": {"d": 0.004}, "lateral": "d"}}])
+    assert drift["mean"][-1, 1] == pytest.approx(0.004 * 5.0, rel=1e-12)
+    slope = [{"custom": {"name": "slope", "parameters": {"g": 0.004}, "lateral": "-g * cos(heading)"}}]
+    assert odomcov.predict(left, right, 0.4, 1e-3, 1e-3, effects=slope, heading0=np.pi)["mean"][-1, 1] == \
+        pytest.approx(0.02, rel=1e-12)
+    assert odomcov.predict(left, right, 0.4, 1e-3, 1e-3, effects=slope)["mean"][-1, 1] == pytest.approx(-0.02, rel=1e-12)
+    plain = odomcov.predict(left, right, 0.4, 1e-3, 1e-3)
+    noisy = odomcov.predict(left, right, 0.4, 1e-3, 1e-3, t=t,
+                            effects=[{"custom": {"name": "n", "parameters": {"c": 3.0}, "noise": "1 + c * v"}}])
+    assert noisy["cov"][-1, 0, 0] == pytest.approx(2.5 * plain["cov"][-1, 0, 0], rel=1e-9)
+    per_run = odomcov.predict(left, right, 0.4, 1e-3, 1e-3, effects=[{"custom": {
+        "name": "load", "parameters": {"e": 0.0}, "random": {"e": 0.002}, "scale": "1 + e"}}])
+    assert per_run["cov"][-1, 0, 0] - plain["cov"][-1, 0, 0] == pytest.approx((0.002 * 5.0) ** 2, rel=1e-9)
+    with pytest.raises(ValueError, match=r"effects\[0\]\.custom\.random\.e: the sd must be >= 0"):
+        odomcov.predict(left, right, 0.4, 1e-3, 1e-3, effects=[{"custom": {
+            "name": "load", "parameters": {"e": 0.0}, "random": {"e": -1}, "scale": "1 + e"}}])

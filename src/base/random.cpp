@@ -7,6 +7,11 @@ namespace {
 
 double gauss_density(double x) { return std::exp(-0.5 * x * x); }
 
+// The wedge test's exp, the same polynomial the SIMD kernels evaluate.
+#include "base/wedge_exp-inl.hpp"
+
+double identity(double v) { return v; }
+
 }  // namespace
 
 ZigguratTables::ZigguratTables() {
@@ -24,9 +29,9 @@ ZigguratTables::ZigguratTables() {
 const ZigguratTables kZiggurat;
 
 double zig_slow(std::uint64_t bits, const Philox::key_type& key, std::uint64_t run,
-                std::uint32_t sample, std::uint32_t retry_base) {
+                std::uint32_t sample, std::uint32_t retry_base, std::uint32_t first_attempt) {
   const ZigguratTables& t = kZiggurat;
-  for (std::uint32_t k = 1; k <= kMaxRetries; ++k) {
+  for (std::uint32_t k = first_attempt; k <= kMaxRetries; ++k) {
     const int i = zig_index(bits);
     const double u = uniform52(bits);
     const double sign = zig_negative(bits) ? -1.0 : 1.0;
@@ -43,8 +48,8 @@ double zig_slow(std::uint64_t bits, const Philox::key_type& key, std::uint64_t r
     // Wedge: the point (x, f(x_i) + U (f(x_{i+1}) - f(x_i))) lies under the density when
     // f0 + U (f1 - f0) < 1 with f0 = f(x_i)/f(x), f1 = f(x_{i+1})/f(x) [Doornik05].
     const double x = u * t.x[i];
-    const double f0 = std::exp(-0.5 * (t.x[i] * t.x[i] - x * x));
-    const double f1 = std::exp(-0.5 * (t.x[i + 1] * t.x[i + 1] - x * x));
+    const double f0 = wedge_exp(-0.5 * (t.x[i] * t.x[i] - x * x), identity);
+    const double f1 = wedge_exp(-0.5 * (t.x[i + 1] * t.x[i + 1] - x * x), identity);
     if (f0 + uniform52(fresh.hi) * (f1 - f0) < 1.0) return sign * x;
     bits = fresh.lo;  // a new candidate
   }

@@ -13,6 +13,17 @@
 //   kTagPerRun | e << 8       per-run draws of effect slot e (the counter's sample = draw number)
 //   kTagMeasurement           measurement noise of synthesised suites
 //   kTagGroup                 group_variation's draw per group (run = hash of the group name)
+//   kTagStartHeading          a synthesised run's start heading (world experiments' heading0)
+//
+// The seed -> numbers mapping, in full (docs/performance.md; the SIMD kernels keep it exactly):
+// key = (seed bits 0-31, seed bits 32-63). A draw's four output words w0..w3 give two 64-bit
+// candidates, lo = w0 | w1 << 32 and hi = w2 | w3 << 32: a sample's left wheel normal comes from
+// lo and its right wheel normal from hi of the draw at kTagWheelNoise; a per-sample or per-run
+// normal of an effect from lo of its own draw. A candidate is a normal by ZIGNOR: block
+// i = bits 0-7, sign = bit 8, u = bits 12-63 / 2^52; accepted when u < ratio[i] (z = +-u x[i]),
+// else zig_slow: the wedge test with the polynomial exp of wedge_exp-inl.hpp (no C library
+// function, so every machine decides it alike), the tail by std::log, new candidates from the
+// retry draws. Test: Simulator.SeedGivesTheDocumentedBits pins three runs' bits.
 #pragma once
 
 #include <Random123/philox.h>
@@ -30,6 +41,7 @@ inline constexpr std::uint32_t kTagEffect = 0x10000;
 inline constexpr std::uint32_t kTagPerRun = 0x20000;
 inline constexpr std::uint32_t kTagMeasurement = 0x30000;
 inline constexpr std::uint32_t kTagGroup = 0x40000;
+inline constexpr std::uint32_t kTagStartHeading = 0x50000;
 /// derive_seed(seed, kGroupSeedStream) keys the group draws (group_effects), apart from every
 /// experiment's own seed derive_seed(seed, i) for i < 2^62.
 inline constexpr std::uint64_t kGroupSeedStream = 0xC000000000000001ull;
@@ -107,11 +119,13 @@ inline bool zig_fast(std::uint64_t bits, double& z) {
   return true;
 }
 
-/// The full ziggurat for a candidate rejected by zig_fast: the wedge test, the tail
-/// (Marsaglia's exponential method) and new candidates, drawing fresh bits at
-/// (run, sample, retry_base | k << kRetryShift) for attempts k = 1, 2, ...
+/// The full ziggurat for a candidate rejected by zig_fast: the wedge test (its exp is the
+/// polynomial of wedge_exp-inl.hpp, the same on every machine and instruction set), the tail
+/// (Marsaglia's exponential method, std::log) and new candidates, drawing fresh bits at
+/// (run, sample, retry_base | k << kRetryShift) for attempts k = 1, 2, ... (from
+/// `first_attempt` on: the SIMD kernel hands over a tail candidate at its attempt).
 double zig_slow(std::uint64_t bits, const Philox::key_type& key, std::uint64_t run,
-                std::uint32_t sample, std::uint32_t retry_base);
+                std::uint32_t sample, std::uint32_t retry_base, std::uint32_t first_attempt = 1);
 
 /// A standard normal from a 64-bit candidate (fast path, else the full method).
 inline double normal(std::uint64_t bits, const Philox::key_type& key, std::uint64_t run,

@@ -1,5 +1,6 @@
 // odomcov calibrate SUITE.yaml --out DIR [--candidates FILE] [--holdout SUITE2 | --train REGEX
 //   [--test REGEX]] [--rounds N] [--alpha A] [--order 1|2] [--threads T] [--exact] [--json FILE]
+//   [--calibration automatic|gaussian|simulation] [--replicates B] [--seed S]
 // The whole loop: diagnose, adopt what predicts held-out folds, repeat, joint fit; writes
 // DIR/model.yaml, DIR/calibrate.json and DIR/diff_drive.yaml all at once (docs/calibrate.md).
 #include <tbb/global_control.h>
@@ -16,6 +17,7 @@
 #include "odomcov/measurement/calibrate.hpp"
 #include "output.hpp"
 #include "progress.hpp"
+#include "referee_options.hpp"
 
 namespace odomcov::cli {
 namespace {
@@ -30,6 +32,7 @@ struct CalibrateCliOptions {
   int order = 2;
   int threads = 0;
   bool exact = false;
+  RefereeOptions referee;
 };
 
 /// Set by SIGINT: the library stops between two fits and nothing is written.
@@ -92,7 +95,7 @@ std::string number(double v, const char* format = "%.6g") { return format_number
 
 // ---- The report --------------------------------------------------------------------------------
 
-void write_rounds(std::ostream& out, const Calibration& c) {
+void write_rounds(std::ostream& out, const CalibrateResult& c) {
   out << "Rounds (each adopts the best candidate that predicts its held-out folds better):\n";
   for (std::size_t r = 0; r < c.rounds.size(); ++r) {
     const Diagnosis& d = c.rounds[r];
@@ -112,7 +115,7 @@ void write_rounds(std::ostream& out, const Calibration& c) {
   }
 }
 
-void write_model(std::ostream& out, const Calibration& c) {
+void write_model(std::ostream& out, const CalibrateResult& c) {
   out << "\nJoint fit of everything named (full likelihood): " << c.joint_note << "\n";
   for (std::size_t i = 0; i < c.joint.names.size(); ++i) {
     const auto k = static_cast<Eigen::Index>(i);
@@ -125,7 +128,7 @@ void write_model(std::ostream& out, const Calibration& c) {
       << ", NEES mean " << fixed(c.after.nees_mean, 3) << ", " << c.after.verdict << "\n";
 }
 
-void write_verdict(std::ostream& out, const Calibration& c, double alpha) {
+void write_verdict(std::ostream& out, const CalibrateResult& c, double alpha) {
   if (c.explained) {
     out << "\nThe final model is consistent with the training runs (compare at alpha = " << alpha << ").\n";
     return;
@@ -154,7 +157,7 @@ void write_holdout(std::ostream& out, const HoldoutSummary& h) {
   for (const std::string& x : h.extrapolation) out << "    " << x << "\n";
 }
 
-std::string report(const Suite& suite, const Calibration& c, double alpha) {
+std::string report(const Suite& suite, const CalibrateResult& c, double alpha) {
   std::ostringstream out;
   std::size_t runs = 0;
   for (const SuiteExperiment& ex : suite.experiments) runs += ex.runs.size();
@@ -174,7 +177,7 @@ std::string report(const Suite& suite, const Calibration& c, double alpha) {
 
 /// Every file of DIR, written at once (StagedDir: nothing half-written). Ctrl-C waits until
 /// the files are in place.
-void write_outputs(const CalibrateCliOptions& opt, const Suite& suite, const Calibration& c, const json& doc) {
+void write_outputs(const CalibrateCliOptions& opt, const Suite& suite, const CalibrateResult& c, const json& doc) {
   StagedDir stage(opt.out);
   stage.write("model.yaml", "# The model odomcov calibrate built from " + suite.name + " (docs/calibrate.md).\n" +
                                 model_yaml(c.model));
@@ -191,6 +194,7 @@ int run_calibrate(const CalibrateCliOptions& opt) {
   options.rounds = opt.rounds;
   options.diagnose.alpha = opt.alpha;
   options.diagnose.path = opt.exact ? FitPath::exact : FitPath::fast;
+  options.diagnose.calibration = calibration_options(opt.referee, nullptr);
   options.diagnose.candidates = load_candidates(opt.candidates, in.train);
   for (const Suite* s : {&in.train, in.held ? &*in.held : nullptr}) {
     if (s) check_second_order_size(*s, opt.order);
@@ -206,7 +210,7 @@ int run_calibrate(const CalibrateCliOptions& opt) {
   ProgressBar bar([&progress] { return progress.fits_done.load(); },
                   std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
                   [&progress] { return "fits, round " + std::to_string(progress.round.load()); });
-  std::optional<Calibration> c;
+  std::optional<CalibrateResult> c;
   try {
     c = calibrate(in.train, start, options, in.held ? &*in.held : nullptr, &progress);
   } catch (const Cancelled&) {
@@ -216,7 +220,7 @@ int run_calibrate(const CalibrateCliOptions& opt) {
     return 130;
   }
   bar.finish();
-  write_outputs(opt, in.train, *c, calibration_json(in.train, start, *c, opt.alpha,
+  write_outputs(opt, in.train, *c, calibrate_json(in.train, start, *c, opt.alpha,
                                      c->holdout ? comparison_json(*in.held, c->holdout->comparison) : json(nullptr)));
   std::signal(SIGINT, previous);
   std::cout << report(in.train, *c, opt.alpha) << "\nWrote " << opt.out << "/model.yaml, calibrate.json and diff_drive.yaml\n";
@@ -240,6 +244,7 @@ void setup_calibrate(CLI::App& app, int& exit_code) {
   cmd->add_option("--order", opt->order, "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
       ->capture_default_str();
   cmd->add_option("--threads", opt->threads, "Worker threads; 0 = all cores")->capture_default_str();
+  add_referee_options(cmd, opt->referee);
   cmd->add_option("--json", opt->json, "Also write calibrate.json to this file");
   cmd->add_flag("--exact", opt->exact, "Every fit on the exact path (slow; the reference)");
   cmd->callback([opt, &exit_code] { exit_code = run_calibrate(*opt); });

@@ -8,6 +8,7 @@
 
 #include "odomcov/base/format.hpp"
 #include "output.hpp"
+#include "referee_options.hpp"
 
 namespace odomcov::cli {
 namespace {
@@ -17,7 +18,9 @@ constexpr std::size_t kNextInJson = 10;
 constexpr std::size_t kNextInReport = 3;
 
 json summary_json(const ModelSummary& s) {
-  return {{"log_likelihood", s.log_likelihood}, {"nees_mean", s.nees_mean}, {"verdict", s.verdict}};
+  json out = {{"log_likelihood", s.log_likelihood}, {"nees_mean", s.nees_mean}, {"verdict", s.verdict}};
+  out.update(calibration_json(s.calibration));
+  return out;
 }
 
 json values_json(const Candidate& c, const std::vector<double>& values) {
@@ -76,6 +79,7 @@ json residuals_json(const std::vector<ResidualAlignment>& residuals) {
   json out = json::array();
   for (const ResidualAlignment& a : residuals) {
     out.push_back({{"feature", a.feature},
+                   {"part", a.part},
                    {"p_value", a.testable ? json(a.p_value) : json(nullptr)},
                    {"p_value_raw", a.testable ? json(a.p_value_raw) : json(nullptr)},
                    {"statistic", a.testable ? json(a.statistic) : json(nullptr)},
@@ -209,7 +213,7 @@ json domain_json(const Domain& d) {
           {"length", range(d.length_m)}, {"duration", range(d.duration_s)}};
 }
 
-json candidates_cv_json(const Calibration& c) {
+json candidates_cv_json(const CalibrateResult& c) {
   json out = json::array();
   for (std::size_t r = 0; r < c.rounds.size(); ++r) {
     for (const Candidate& x : c.rounds[r].candidates) {
@@ -243,7 +247,7 @@ json diff_drive_json(const DiffDriveParameters& p) {
 
 }  // namespace
 
-json calibration_json(const Suite& suite, const SuiteModel& start, const Calibration& c, double alpha,
+json calibrate_json(const Suite& suite, const SuiteModel& start, const CalibrateResult& c, double alpha,
                       const json& holdout_compare) {
   json rounds = json::array();
   SuiteModel model = start;

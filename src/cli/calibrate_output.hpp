@@ -30,7 +30,7 @@ nlohmann::json diagnosis_json(const Suite& suite, const SuiteModel& model, const
 /// calibrate.json: every round, the decisions, the final model, the design and the held-out
 /// judgement; `holdout_compare` (compare's JSON of the held-out runs, or null) goes under
 /// holdout.compare.
-nlohmann::json calibration_json(const Suite& suite, const SuiteModel& start, const Calibration& c,
+nlohmann::json calibrate_json(const Suite& suite, const SuiteModel& start, const CalibrateResult& c,
                                 double alpha, const nlohmann::json& holdout_compare = nullptr);
 
 /// ROS 2 parameters for diff_drive_controller (docs/calibrate.md, "diff_drive.yaml"), with

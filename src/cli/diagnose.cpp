@@ -14,6 +14,7 @@
 #include "odomcov/io/suite_io.hpp"
 #include "output.hpp"
 #include "progress.hpp"
+#include "referee_options.hpp"
 
 namespace odomcov::cli {
 namespace {
@@ -26,6 +27,7 @@ struct DiagnoseOptions {
   std::string json;
   int order = 2;
   bool exact = false;
+  RefereeOptions referee;
 };
 
 /// --effects: catalogue names, wheel_noise_level or group_variation(<effect>.<parameter>).
@@ -99,7 +101,8 @@ void write_ranking(std::ostream& out, const Suite& suite, const Diagnosis& d) {
   out << "odomcov diagnose: " << suite.name << " (" << d.runs << " runs), family-wise alpha = "
       << d.alpha << " over " << d.candidates.size() << " candidates\n"
       << "before: log-likelihood " << fixed(d.before.log_likelihood, 2) << ", NEES mean "
-      << fixed(d.before.nees_mean, 3) << ", " << d.before.verdict << "\n"
+      << fixed(d.before.nees_mean, 3) << ", " << d.before.verdict << " ("
+      << calibration_text(d.before.calibration) << ")\n"
       << "tails: " << (d.kurtosis.valid ? std::string(d.heavy_tails ? "heavy" : "Gaussian") +
                                               " (Mardia kurtosis z = " + fixed(d.kurtosis.statistic, 2) +
                                               ", p = " + sci(d.kurtosis.p_value, 2) + ")"
@@ -126,7 +129,8 @@ void write_ranking(std::ostream& out, const Suite& suite, const Diagnosis& d) {
            "every effect refitted with the new one:\n"
         << model_yaml(b.model)
         << "after: log-likelihood " << fixed(d.after.log_likelihood, 2) << ", NEES mean "
-        << fixed(d.after.nees_mean, 3) << ", " << d.after.verdict << "\n";
+        << fixed(d.after.nees_mean, 3) << ", " << d.after.verdict << " ("
+        << calibration_text(d.after.calibration) << ")\n";
   }
 }
 
@@ -167,6 +171,7 @@ int run_diagnose(const DiagnoseOptions& opt) {
   check_alpha(opt.alpha);
   check_effect_names(opt.effects);
   if (!opt.json.empty()) check_output_path(opt.json);
+  const CalibrationOptions calibration = calibration_options(opt.referee, nullptr);
   const Suite suite = load_suite(opt.suite);
   const EffectList own = load_candidates(opt.candidates, suite);
   check_order(opt.order);
@@ -179,7 +184,7 @@ int run_diagnose(const DiagnoseOptions& opt) {
                   std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
                   "fits");
   const Diagnosis d = diagnose(suite, model, opt.alpha, opt.effects, &progress, own,
-                               opt.exact ? FitPath::exact : FitPath::fast);
+                               opt.exact ? FitPath::exact : FitPath::fast, calibration);
   bar.finish();
 
   std::ostringstream out;
@@ -209,6 +214,7 @@ void setup_diagnose(CLI::App& app, int& exit_code) {
   cmd->add_option("--order", opt->order,
                   "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
       ->capture_default_str();
+  add_referee_options(cmd, opt->referee);
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
   cmd->add_flag("--exact", opt->exact,
                 "Propagate every run at every likelihood evaluation (slow; the reference for the "

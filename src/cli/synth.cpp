@@ -33,7 +33,7 @@ int run_synth(const SynthOptions& opt) {
   for (std::size_t i = 0; i < world.experiments.size(); ++i) {
     const WorldExperiment& ex = world.experiments[i];
     const std::vector<Vector3> measured = synthesize(world, i, opt.threads);
-    stage.write(ex.name + ".csv", measurements_csv(measured));
+    stage.write(ex.name + ".csv", measurements_csv(measured, start_headings(world, i)));
     const SampleMoments m = moments(measured);
     char line[160];
     std::snprintf(line, sizeof line, "  %-26s %4lld   (%.4f, %.4f, %.4f)\n", ex.name.c_str(),

@@ -110,6 +110,10 @@ struct ArcStep {
   /// The piece's end pose in its start frame (arc_displacement).
   double chord_x(double d) const { return d * sinc1; }
   double chord_y(double d) const { return 0.5 * d * angle * sinc_half * sinc_half; }
+  /// The same with a lateral slip l to the left, spread along the arc as the travel is: the
+  /// displacement is (d + i l) U(a), U(a) = sinc a + i (a/2) sinc^2(a/2) (Systematic, effects).
+  double chord_x(double d, double l) const { return chord_x(d) - chord_y(l); }
+  double chord_y(double d, double l) const { return chord_y(d) + chord_x(l); }
 };
 
 /// Everything the noise covariance and the input gain need besides: sinc(2a), u3(a), u3(2a), a4(a).
@@ -161,5 +165,23 @@ Vector3 arc_displacement(double center_m, const ArcStep& f);
 Matrix3 arc_transition(double center_m, const ArcStep& f);
 Matrix3 arc_noise_covariance(double center_m, const ArcFunctions& f, const Matrix2& intensity);
 Matrix32 arc_input_gain(double center_m, const ArcFunctions& f);
+
+/// The same kernels for a piece that also slips l [m] to the left (effects' lateral slip): its
+/// displacement in its start frame is (d + i l) U(a), so the heading noise at a point of the
+/// piece rotates the rest of the lateral slip with the rest of the travel. With l = 0 each is
+/// the kernel above, bit for bit.
+///  * arc_transition: third column i e^{-ia} (d + i l) U(a) = (chord_y(d) - chord_x(l),
+///    chord_x(d) + chord_y(l)) in the end frame.
+///  * arc_noise_covariance: with w the fraction of the piece still to go, the end error per unit
+///    heading noise is (a_d(w) - b_l(w), b_d(w) + a_l(w)) with a_x(w) = x (1 - cos aw)/a and
+///    b_x(w) = x sin(aw)/a (Psi of [Kleeman95, eq. (40)] for x = d; for the slip, -i l e^{-ia}
+///    int_v^1 e^{iau} du); the along-track column (cos aw, -sin aw) is unchanged.
+///  * arc_input_gain: 3 x 3, columns (e_dtheta, e_d, e_lat) spread uniformly over the piece:
+///    the first two as above, integrated, and the slip's (int sin, int cos, 0).
+Vector3 arc_displacement(double center_m, double lateral_m, const ArcStep& f);
+Matrix3 arc_transition(double center_m, double lateral_m, const ArcStep& f);
+Matrix3 arc_noise_covariance(double center_m, double lateral_m, const ArcFunctions& f,
+                             const Matrix2& intensity);
+Matrix3 arc_input_gain(double center_m, double lateral_m, const ArcFunctions& f);
 
 }  // namespace odomcov::detail

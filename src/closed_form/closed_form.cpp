@@ -70,6 +70,20 @@ Matrix3 arc_transition(double center_m, const ArcStep& f) {
   return phi;
 }
 
+Vector3 arc_displacement(double center_m, double lateral_m, const ArcStep& f) {
+  if (lateral_m == 0.0) return arc_displacement(center_m, f);
+  return {f.chord_x(center_m, lateral_m), f.chord_y(center_m, lateral_m), f.angle};
+}
+
+Matrix3 arc_transition(double center_m, double lateral_m, const ArcStep& f) {
+  Matrix3 phi = arc_transition(center_m, f);
+  if (lateral_m != 0.0) {
+    phi(0, 2) -= f.chord_x(lateral_m);
+    phi(1, 2) += f.chord_y(lateral_m);
+  }
+  return phi;
+}
+
 }  // namespace detail
 
 Vector3 arc_displacement(double center_m, double angle_rad) {
@@ -119,6 +133,63 @@ Matrix32 arc_input_gain(double center_m, const ArcFunctions& f) {
   const ArcIntegrals I(center_m, f);
   Matrix32 g;
   g << I.a, I.c, I.b, -I.s, 1.0, 0.0;
+  return g;
+}
+
+namespace {
+
+/// The integrals of the heading column (A_x, A_y) = (a_d - b_l, b_d + a_l) of a piece with a
+/// lateral slip l (arc_functions.hpp), from the unit integrals U (d = 1): a_x = x a_1 etc.
+struct LateralIntegrals {
+  double x, y;              // int A_x, int A_y
+  double xx, yy, xy;        // int A_x^2, int A_y^2, int A_x A_y
+  double xc, yc, xs, ys;    // int A_x cos, int A_y cos, int A_x sin, int A_y sin
+  LateralIntegrals(double d, double l, const ArcIntegrals& U) {
+    x = d * U.a - l * U.b;
+    y = d * U.b + l * U.a;
+    xx = d * d * U.aa - 2.0 * d * l * U.ab + l * l * U.bb;
+    yy = d * d * U.bb + 2.0 * d * l * U.ab + l * l * U.aa;
+    xy = (d * d - l * l) * U.ab + d * l * (U.aa - U.bb);
+    xc = d * U.ac - l * U.bc;
+    yc = d * U.bc + l * U.ac;
+    xs = d * U.as - l * U.bs;
+    ys = d * U.bs + l * U.as;
+  }
+};
+
+}  // namespace
+
+Matrix3 arc_noise_covariance(double center_m, double lateral_m, const ArcFunctions& f,
+                             const Matrix2& intensity) {
+  if (lateral_m == 0.0) return arc_noise_covariance(center_m, f, intensity);
+  const ArcIntegrals U(1.0, f);
+  const LateralIntegrals L(center_m, lateral_m, U);
+  const double q11 = intensity(0, 0);
+  const double q12 = 0.5 * (intensity(0, 1) + intensity(1, 0));
+  const double q22 = intensity(1, 1);
+  Matrix3 q;
+  q(0, 0) = q11 * L.xx + 2.0 * q12 * L.xc + q22 * U.cc;
+  q(0, 1) = q11 * L.xy + q12 * (L.yc - L.xs) - q22 * U.cs;
+  q(0, 2) = q11 * L.x + q12 * U.c;
+  q(1, 1) = q11 * L.yy - 2.0 * q12 * L.ys + q22 * U.ss;
+  q(1, 2) = q11 * L.y - q12 * U.s;
+  q(2, 2) = q11;
+  q(1, 0) = q(0, 1);
+  q(2, 0) = q(0, 2);
+  q(2, 1) = q(1, 2);
+  return q;
+}
+
+Matrix3 arc_input_gain(double center_m, double lateral_m, const ArcFunctions& f) {
+  Matrix3 g;
+  if (lateral_m == 0.0) {
+    const ArcIntegrals I(center_m, f);
+    g << I.a, I.c, I.s, I.b, -I.s, I.c, 1.0, 0.0, 0.0;
+    return g;
+  }
+  const ArcIntegrals U(1.0, f);
+  const LateralIntegrals L(center_m, lateral_m, U);
+  g << L.x, U.c, U.s, L.y, -U.s, U.c, 1.0, 0.0, 0.0;
   return g;
 }
 

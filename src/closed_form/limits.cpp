@@ -20,6 +20,13 @@ std::string check_length(double value_m) {
   return "";
 }
 
+std::string check_angle(double value_rad) {
+  if (!std::isfinite(value_rad) || std::abs(value_rad) > kMaxTurn_rad) {
+    return "magnitude " + g(value_rad) + " rad is beyond the limit of " + g(kMaxTurn_rad) + " rad";
+  }
+  return "";
+}
+
 std::string check_wheelbase(double wheelbase_m) {
   if (!(wheelbase_m >= kMinWheelbase_m && wheelbase_m <= kMaxLength_m)) {
     return "must be in [" + g(kMinWheelbase_m) + ", " + g(kMaxLength_m) + "] m, got " +

@@ -187,4 +187,32 @@ std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m,
   return pieces;
 }
 
+std::vector<ArcSegment> sample_model_pieces(const Path& path, double wheelbase_m,
+                                            std::vector<double>* durations_s) {
+  // As many pieces as model_pieces plus two per run of equal samples (checked as there).
+  const double total = limits::model_piece_count(path, wheelbase_m);
+  if (!(total <= kMaxModelPieces)) {
+    throw std::length_error("sample_model_pieces: the path needs " + std::to_string(total) +
+                            " pieces, above kMaxModelPieces (limits.hpp)");
+  }
+  std::vector<ArcSegment> pieces;
+  if (durations_s) durations_s->clear();
+  auto add = [&](const ArcSegment& piece, double duration) {
+    pieces.push_back(piece);
+    if (durations_s) durations_s->push_back(duration);
+  };
+  for (const SampleRun& run : sample_schedule(path)) {
+    add(run.increment, run.duration_s);
+    if (run.count < 2) continue;
+    const double rest = static_cast<double>(run.count - 1);
+    const ArcSegment seg{rest * run.increment.left_m, rest * run.increment.right_m};
+    const double cuts = std::max({1.0, std::ceil(std::abs(seg.heading_change_rad(wheelbase_m)) / kPieceMaxAngle),
+                                  std::ceil(std::abs(seg.center_m()) / kPieceMaxTravel)});
+    const auto n = static_cast<std::int64_t>(cuts);
+    const double nd = static_cast<double>(n);
+    for (std::int64_t k = 0; k < n; ++k) add({seg.left_m / nd, seg.right_m / nd}, rest * run.duration_s / nd);
+  }
+  return pieces;
+}
+
 }  // namespace odomcov

@@ -29,15 +29,19 @@ class Bumps final : public Effect {
   void begin_run(RunState& state, const Draws& draws) const override {
     state.value[0] = rate_ > 0.0 ? -std::log(1.0 - draws.run_uniform(0)) / rate_ : HUGE_VAL;
   }
-  void perturb(WorldSample& s, RunState& state, const Draws& draws) const override {
-    double& to_next = state.value[0];
-    to_next -= 0.5 * (std::abs(s.encoder_left) + std::abs(s.encoder_right));
+  bool events() const override { return true; }
+  void event(std::uint32_t sample, RunState& state, const Draws& draws, double& extra_left,
+             double& extra_right) const override {
+    double& to_next = state.value[0];  // the simulator has taken this sample's travel off
     for (std::uint32_t j = 0; to_next <= 0.0 && j < kMaxBumpsPerSample; ++j) {
       const std::uint32_t i = kDrawsPerBump * j;
-      const double size = sigma_ * draws.normal(s.index, i + 1);
-      (draws.uniform(s.index, i) < 0.5 ? s.extra_left : s.extra_right) += size;
-      to_next += -std::log(1.0 - draws.uniform(s.index, i + 2)) / rate_;
+      const double size = sigma_ * draws.normal(sample, i + 1);
+      (draws.uniform(sample, i) < 0.5 ? extra_left : extra_right) += size;
+      to_next += -std::log(1.0 - draws.uniform(sample, i + 2)) / rate_;
     }
+  }
+  std::string non_gaussian() const override {
+    return rate_ > 0 && sigma_ > 0 ? "Poisson impulses (heavy tails)" : "";
   }
   std::string check_samples(double max_mean_travel_m) const override {
     const double per_sample = rate_ * max_mean_travel_m;
@@ -149,7 +153,11 @@ EffectType bumps_type() {
            // sigma from the tails, and lets the kurtosis decide against the noise level.
            /*diagnose_fitted=*/{"rate"},
            /*complete=*/complete_bumps,
-           /*confused_with=*/kWheelNoiseLevel},
+           /*confused_with=*/kWheelNoiseLevel,
+           /*rescale_tails=*/[](EffectSpec& spec, double factor) {
+             spec.values[1] *= factor;
+             spec.values[0] /= factor * factor;
+           }},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<Bumps>(v[0], v[1]);
           }};

@@ -62,36 +62,60 @@ struct Motion {
   double since_reversal_left_m = HUGE_VAL, since_reversal_right_m = HUGE_VAL;
   double t_s = 0.0;  // time at the start of the increment
   double s_m = 0.0;  // mean wheel travel (|dL| + |dR|)/2 so far, at the start of the increment
+  /// Acceleration along the path: (v - v of the previous increment)/dt, with v = 0 before the
+  /// first increment. On a model piece, the piece's own speed against the previous piece's (a
+  /// piece the model cuts further for its own accuracy keeps its parent's value).
+  double a_mps2 = 0.0;
+  double omega_radps = 0.0;  // turn rate (dR - dL)/(B dt), nominal B
+  double turn_rad = 0.0;     // encoder heading change (dR - dL)/B over the increment, nominal B
+  double theta_rad = 0.0;    // encoder heading since the run's start, at the start of the increment
+  double heading0_rad = 0.0;  // the run's start heading in the reference's frame (0 if unknown)
 };
 
 /// Builds the Motion of consecutive increments, keeping time, distance and each wheel's
 /// direction. `wheelbase_m` is the nominal one (curvature as the encoders see it).
 class MotionTracker {
  public:
-  explicit MotionTracker(double wheelbase_m) : wheelbase_m_(wheelbase_m) {}
+  /// `heading0_rad`: the run's start heading in the reference's own frame (Motion::heading0_rad).
+  explicit MotionTracker(double wheelbase_m, double heading0_rad = 0.0)
+      : wheelbase_m_(wheelbase_m), heading0_rad_(heading0_rad) {}
   /// The Motion of the next increment (the first of `count` identical ones), then advances past
   /// all `count` of them.
   Motion next(double dL_m, double dR_m, double dt_s, std::int64_t count = 1);
 
  private:
   double wheelbase_m_;
-  double t_s_ = 0.0, s_m_ = 0.0;
+  double heading0_rad_;
+  double t_s_ = 0.0, s_m_ = 0.0, theta_rad_ = 0.0;
+  double v_mps_ = 0.0;  // of the last increment (0 before the first)
   int dir_left_ = 1, dir_right_ = 1;
   double since_left_ = HUGE_VAL, since_right_ = HUGE_VAL;
 };
 
 /// What a systematic effect does to one increment's true motion: true travel of each wheel =
-/// scale x encoder + offset, true wheelbase = factor x nominal. Effects compose: scales and the
-/// factor multiply, offsets add (applied after every scale).
+/// scale x encoder + offset, true wheelbase = factor x nominal, a lateral slip of the centre of
+/// `lateral` metres to the left per metre of mean wheel travel (|dL| + |dR|)/2, and the white
+/// wheel noise variance k^2 |dL| (and |dR|) times `noise_factor`. Effects compose: scales, the
+/// wheelbase factor and the noise factor multiply, offsets and lateral slips add (offsets
+/// applied after every scale).
+///
+/// Where the lateral slip acts (both sides): it accumulates along the increment's arc as the
+/// travel does, so the increment's displacement in its start frame is (d + i l) U(a) with
+/// d the true centre travel, l = lateral x (|dL| + |dR|)/2, a the true heading change and
+/// U(a) = int_0^1 e^{i a u} du = sinc(a/2) e^{i a/2}: the lateral part is l sinc(a/2) to the
+/// left of the chord's heading (a/2 into the increment). A piece of any length then gives the
+/// same displacement as its samples together (docs/conventions.md, "Lateral slip").
 struct Systematic {
   double scale_left = 1.0, scale_right = 1.0;
   double wheelbase_factor = 1.0;
   double offset_left_m = 0.0, offset_right_m = 0.0;
+  double lateral = 0.0;       // [m/m] leftward slip per metre of mean wheel travel
+  double noise_factor = 1.0;  // on both wheels' white noise variance
 
   bool operator==(const Systematic& o) const {
     return scale_left == o.scale_left && scale_right == o.scale_right &&
            wheelbase_factor == o.wheelbase_factor && offset_left_m == o.offset_left_m &&
-           offset_right_m == o.offset_right_m;
+           offset_right_m == o.offset_right_m && lateral == o.lateral && noise_factor == o.noise_factor;
   }
   ArcSegment travel(double dL_m, double dR_m) const {
     return {scale_left * dL_m + offset_left_m, scale_right * dR_m + offset_right_m};
@@ -100,33 +124,44 @@ struct Systematic {
 
 /// What a systematic effect's factors depend on, so the simulator knows how often to evaluate
 /// them: never (`none`: once per path), on the increment only (`increment`: dL, dR, dt, v,
-/// kappa, r, dir, turn, constant along a leg of equal samples), or on the history (`history`:
-/// t, s or the reversal state, evaluated per sample).
+/// kappa, r, dir, turn, omega, constant along a leg of equal samples), or on the history
+/// (`history`: t, s, theta, heading, the acceleration a or the reversal state, evaluated per
+/// sample).
 enum class Dependence { none = 0, increment = 1, history = 2 };
 
-/// What an effect keeps from one sample to the next within a run (per-run constants, the
-/// distance to the next bump); zeroed by the simulator before begin_run.
+/// What an effect keeps from one run to the next sample (per-run constants, the distance to the
+/// next event); zeroed by the simulator before begin_run.
 struct RunState {
   double value[4] = {0.0, 0.0, 0.0, 0.0};
 };
 
-/// One sample on the world side as the per-sample hook sees it.
-struct WorldSample {
-  std::uint32_t index = 0;        // sample index within the run
-  double encoder_left = 0.0;      // encoder increments
+/// A leg of the world side (a stretch of equal samples) as a stochastic effect sees it.
+struct LegView {
+  double encoder_left = 0.0;      // encoder increments per sample
   double encoder_right = 0.0;
   double wheelbase_nominal = 0.0;
-  double travel_left = 0.0;       // systematic true travel (scale x encoder + offset)
+  double travel_left = 0.0;       // systematic true travel per sample (scale x encoder + offset)
   double travel_right = 0.0;
-  double wheelbase = 0.0;         // true wheelbase of this sample
-  double extra_left = 0.0;        // output: travel the effect adds to each wheel
-  double extra_right = 0.0;
+  double wheelbase = 0.0;         // true wheelbase of the leg's samples
+};
+
+/// One term of a sample's extra wheel travel: travel[wheel] gets (value x a) x b added, where
+/// value is the effect's per-run value `index` (RunState::value, set by begin_run) or its
+/// per-sample standard normal `index` (drawn at Draws::normal(sample, index)). a and b are the
+/// leg's coefficients (two, so an effect keeps the rounding of its own formula).
+struct TravelTerm {
+  int wheel = 0;          // 0 left, 1 right
+  bool per_run = false;   // value from RunState (true) or a per-sample normal (false)
+  std::uint32_t index = 0;
+  double a = 1.0, b = 1.0;
 };
 
 /// One constant-curvature piece on the model side. The engine fills the inputs, the plain
 /// robot's values and the systematic factors (every effect's `systematic` for this piece's
 /// motion, folded in first as on the world side, so no effect's model depends on the order
 /// effects are listed); each effect's `model` then adds what it models.
+class Effect;
+
 struct PieceModel {
   ArcSegment encoder;        // input: encoder travel over the piece
   double wheelbase_m = 0.0;  // input: nominal wheelbase
@@ -135,11 +170,21 @@ struct PieceModel {
   double scale_left = 1.0;   // input, systematic: true travel = scale x encoder (+ offset)
   double scale_right = 1.0;
   double wheelbase_factor = 1.0;  // input, systematic: true wheelbase = factor x nominal
-  Eigen::Matrix2d wheel_cov = Eigen::Matrix2d::Zero();  // white (e_L, e_R) over the piece
+  /// input: every active effect, for an effect whose random part moves its own systematic terms
+  /// (others_systematic).
+  const std::vector<std::unique_ptr<Effect>>* effects = nullptr;
+  /// white (e_L, e_R) over the piece: k^2 |travel| times the systematic noise factor
+  Eigen::Matrix2d wheel_cov = Eigen::Matrix2d::Zero();
   double heading_var = 0.0;  // extra white heading variance over the piece
-  /// One column per standard-normal per-run constant: its effect on (e_L, e_R) over the piece.
-  std::vector<Eigen::Vector2d> run_columns;
+  /// One column per standard-normal per-run constant: its effect on (e_L, e_R, e_lat) over the
+  /// piece, e_lat the piece's lateral displacement (Systematic::lateral times the mean wheel
+  /// travel), a change of the true wheelbase written as the wheel errors that turn the same.
+  std::vector<Eigen::Vector3d> run_columns;
 };
+
+/// The systematic terms of every effect of `piece.effects` but `self`, for the piece's motion:
+/// what an effect whose random draw moves its own terms composes them with (custom.cpp).
+Systematic others_systematic(const PieceModel& piece, const Effect* self);
 
 class Effect {
  public:
@@ -176,15 +221,54 @@ class Effect {
     return "";
   }
 
+  /// Model side: true when the systematic terms vary smoothly with the history along a piece
+  /// (a custom expression in s, t, theta or heading): resolve then cuts a piece finer wherever
+  /// one evaluation at its middle would miss their mean along it (kRefineTolerance).
+  virtual bool refines() const { return false; }
+
   // ---- World side: randomness -----------------------------------------------------------------
+  // The simulator runs these for a block of runs at once in SIMD lanes (and run by run in its
+  // scalar reference, with the same arithmetic), so an effect states what it does per leg rather
+  // than acting per sample. Per sample and run, in the order the effects are listed:
+  //   1. the wheels' standard normals (z_L, z_R) are mixed by every `noise_mix`;
+  //   2. each effect's `terms` for the leg add to the wheels' extra travel, and an effect with
+  //      `events` counts RunState::value[0] down by the sample's mean wheel travel
+  //      (|dL| + |dR|)/2 and, when it reaches 0 or below, handles the event by `event`;
+  //   3. true travel = systematic travel + sigma z + extra.
   /// True when the hooks below do anything (the simulator then runs its general kernel).
   virtual bool stochastic() const { return false; }
+  /// Per-run values (per lane, once per run), e.g. per-run normals or the first event's distance.
   virtual void begin_run(RunState& state, const Draws& draws) const { (void)state, (void)draws; }
-  /// Acts on the standard normals of the two wheels' noise before they are scaled.
-  virtual void shape_noise(double& z_left, double& z_right) const { (void)z_left, (void)z_right; }
-  virtual void perturb(WorldSample& sample, RunState& state, const Draws& draws) const {
-    (void)sample, (void)state, (void)draws;
+  /// True when the systematic terms depend on this run's draws (a custom effect with `random:`
+  /// parameters): the simulator then leaves the effect out of the legs it builds once per path
+  /// and composes, for every leg of every run, run_systematic with the leg's other terms.
+  virtual bool per_run_systematic() const { return false; }
+  /// The systematic terms of one increment for this run's draws (`state` from begin_run),
+  /// composed into `factors` as systematic() does. Thread-safe: runs are simulated in parallel.
+  virtual void run_systematic(const Motion& motion, const RunState& state, Systematic& factors) const {
+    (void)motion, (void)state, (void)factors;
   }
+  /// Mixes the standard normals of the two wheels' noise before they are scaled:
+  /// z_R <- from_left z_L + from_right z_R. Returns false when the effect does not mix.
+  virtual bool noise_mix(double& from_left, double& from_right) const {
+    (void)from_left, (void)from_right;
+    return false;
+  }
+  /// The terms this effect adds to each sample of a leg (none: the leg is untouched and draws
+  /// nothing for this effect).
+  virtual void terms(const LegView& leg, std::vector<TravelTerm>& out) const { (void)leg, (void)out; }
+  /// Rare events along the travel (see above): `event` adds the event's travel to the wheels
+  /// and moves RunState::value[0] on to the next event, drawing from `draws` at `sample`.
+  virtual bool events() const { return false; }
+  virtual void event(std::uint32_t sample, RunState& state, const Draws& draws, double& extra_left,
+                     double& extra_right) const {
+    (void)sample, (void)state, (void)draws, (void)extra_left, (void)extra_right;
+  }
+
+  /// World side: "" when the effect adds only Gaussian noise or deterministic changes, else what
+  /// makes the errors it gives non-Gaussian ("a radius drawn once per run"): compare then
+  /// calibrates its tests by simulating the model's world (non_gaussian_effect).
+  virtual std::string non_gaussian() const { return ""; }
 
   // ---- Model side (first order in the effect) ------------------------------------------------
   /// Number of standard-normal per-run constants this effect contributes columns for.
@@ -193,13 +277,13 @@ class Effect {
   virtual void model(PieceModel& piece) const { (void)piece; }
 };
 
-/// The most standard-normal per-run constants a model may carry (per_run_radius has two); the
-/// engine keeps their columns in fixed storage.
-inline constexpr int kMaxRunConstants = 4;
+/// The engine keeps the per-run constants' columns in fixed storage of kMaxRunConstants
+/// (effects.hpp: per_run_radius has two, a custom effect one per random parameter).
+using odomcov::kMaxRunConstants;
 
 /// A piece as every propagator sees it once the effects have spoken: the true motion (systematic
-/// factors applied), the white noise intensity of (e_dtheta, e_d) over the piece, and the effect
-/// of each standard-normal per-run constant on (e_dtheta, e_d). The first-order engine (predict)
+/// factors applied) and the white noise intensity of (e_dtheta, e_d) over the piece (the per-run
+/// constants' columns are the path's: ResolvedPath::columns). The first-order engine (predict)
 /// and any higher-order propagator consume these, so effects are modelled in one place.
 struct ResolvedPiece {
   /// Built from its encoder travel, the rest set by resolve (a user-provided constructor: the
@@ -208,11 +292,10 @@ struct ResolvedPiece {
 
   ArcSegment encoder;            // encoder travel over the piece
   double center_m = 0.0;         // true centre travel d
+  double lateral_m = 0.0;        // true lateral slip l (to the left; Systematic, "lateral")
   double angle_rad = 0.0;        // true heading change a
   double wheelbase_true_m = 0.0;
   Matrix2 intensity = Matrix2::Zero();  // cov of (e_dtheta, e_d) accumulated over the piece
-  // 2 x run_constants: per-run constants -> (e_dtheta, e_d)
-  Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, kMaxRunConstants> input_columns;
 };
 
 /// The resolved path, plus what acts after the path: the measurement hooks (reference_offset).
@@ -223,18 +306,35 @@ struct ResolvedPiece {
 struct ResolvedPath {
   std::vector<ResolvedPiece> pieces;
   int run_constants = 0;
+  /// Piece after piece, the 3 x run_constants effect of each standard-normal per-run constant on
+  /// (e_dtheta, e_d, e_lat), spread uniformly along the piece as its own motion is (column-major;
+  /// empty without per-run constants, so that a piece stays small on the common path).
+  std::vector<double> input_columns;
   std::vector<std::shared_ptr<const Effect>> measurement_effects;
 
+  Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic>> columns(std::size_t piece) const {
+    return {input_columns.data() + 3 * static_cast<std::size_t>(run_constants) * piece, 3, run_constants};
+  }
   void measure(Vector3& pose, Matrix3& P_world) const;
 };
 
 /// Applies every effect's model side to each encoder piece (systematic factors for the piece's
 /// motion first, then each effect's `model`) for a robot (nominal wheelbase, model's wheel
 /// noise). `durations_s` gives each piece's duration (empty: unknown, so the motion's dt and v
-/// are NaN).
+/// are NaN); `heading0_rad` the run's start heading in the reference's frame (the `heading`
+/// variable of custom effects). A piece is cut where a history effect changes its terms inside
+/// it (Effect::split_at) and, for effects whose terms vary smoothly along it
+/// (Effect::refines), where one evaluation at its middle would miss their mean along it.
 ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
                      const std::vector<double>& durations_s, const Robot& robot,
-                     const EffectList& effects);
+                     const EffectList& effects, double heading0_rad = 0.0);
+
+/// The largest error resolve allows in a piece's terms (scales, wheelbase and noise factors,
+/// lateral slip per metre) from evaluating them once at the piece's middle instead of along it:
+/// the error of the mean then stays far below any Monte-Carlo error (1e-7 of the travel).
+inline constexpr double kRefineTolerance = 1e-7;
+/// resolve halves a piece at most this many times for kRefineTolerance (2^8 parts).
+inline constexpr int kMaxRefineDepth = 8;
 
 /// A catalogue entry: the public description plus the factory.
 struct EffectType {

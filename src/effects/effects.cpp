@@ -38,6 +38,17 @@ const EffectInfo* info_of(const EffectSpec& spec) {
   return spec.custom ? &spec.custom->info : find_effect(spec.name);
 }
 
+EffectNeeds effect_needs(const EffectList& list) {
+  EffectNeeds needs;
+  for (const EffectSpec& spec : list) {
+    const EffectInfo* info = info_of(spec);
+    if (!info) continue;  // unknown: check_effects refuses it where it is used
+    needs.start_heading = needs.start_heading || info->uses_start_heading;
+    needs.sample_pieces = needs.sample_pieces || info->uses_acceleration;
+  }
+  return needs;
+}
+
 namespace {
 
 /// A parameter's value checked against its range: "" when within, else the error.
@@ -86,9 +97,14 @@ std::string custom_yaml(const EffectSpec& spec) {
     text += (i ? ", " : "") + def.parameters[i] + ": " + format_number(spec.values[i]);
   }
   text += "}";
-  for (const auto& [key, e] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
-                               std::pair{"scale_right", &def.scale_right},
-                               std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+  if (!def.random.empty()) {
+    text += ", random: {";
+    for (std::size_t j = 0; j < def.random.size(); ++j) {
+      text += (j ? ", " : "") + def.random[j] + ": " + format_number(spec.values[def.parameters.size() + j]);
+    }
+    text += "}";
+  }
+  for (const auto& [key, e] : def.expressions()) {
     if (!e->text.empty()) text += std::string(", ") + key + ": " + yaml_quoted(e->text);
   }
   return text + "}";
@@ -108,31 +124,55 @@ std::string effect_yaml(const EffectSpec& spec) {
   return text + "}";
 }
 
+namespace {
+
+/// "" when `target` ("<effect>.<parameter>") names a systematic parameter of an effect of
+/// `list` other than group_variation, else what is wrong.
+std::string check_varied_parameter(const EffectList& list, const std::string& target) {
+  const std::size_t dot = target.find('.');
+  if (dot == std::string::npos) {
+    return "parameter must be <effect>.<parameter> of another effect in the list, got '" + target + "'";
+  }
+  const std::string effect = target.substr(0, dot), param = target.substr(dot + 1);
+  const EffectSpec* varied = nullptr;
+  for (const EffectSpec& e : list) varied = e.name == effect && effect != kGroupVariation ? &e : varied;
+  if (!varied) return "parameter '" + target + "': no effect " + effect + " in the list";
+  const EffectInfo* info = info_of(*varied);  // a catalogue or a custom effect
+  const EffectParameterInfo* p = nullptr;
+  for (const EffectParameterInfo& q : info->parameters) p = q.name == param ? &q : p;
+  if (!p) return "parameter '" + target + "': " + effect + " has no parameter " + param;
+  if (p->random_sd) {
+    return "parameter '" + target + "': the sd of a parameter drawn per run; group_variation varies a systematic parameter";
+  }
+  if (!info->systematic) {
+    return "parameter '" + target + "': " + effect + " only adds randomness; group_variation varies a systematic parameter";
+  }
+  return "";
+}
+
+}  // namespace
+
 std::string check_group_target(const EffectList& list) {
   for (const EffectSpec& g : list) {
     if (g.name != kGroupVariation) {
       if (!g.target.empty()) return g.name + " takes no 'parameter'";
       continue;
     }
-    const std::size_t dot = g.target.find('.');
-    if (dot == std::string::npos) {
-      return "parameter must be <effect>.<parameter> of another effect in the list, got '" +
-             g.target + "'";
-    }
-    const std::string effect = g.target.substr(0, dot), param = g.target.substr(dot + 1);
-    const EffectSpec* varied = nullptr;
-    for (const EffectSpec& e : list) varied = e.name == effect && effect != kGroupVariation ? &e : varied;
-    if (!varied) return "parameter '" + g.target + "': no effect " + effect + " in the list";
-    const EffectInfo* info = info_of(*varied);  // a catalogue or a custom effect
-    bool known = false;
-    for (const EffectParameterInfo& p : info->parameters) known = known || p.name == param;
-    if (!known) return "parameter '" + g.target + "': " + effect + " has no parameter " + param;
-    if (!info->systematic) {
-      return "parameter '" + g.target + "': " + effect +
-             " only adds randomness; group_variation varies a systematic parameter";
-    }
+    if (std::string e = check_varied_parameter(list, g.target); !e.empty()) return e;
   }
   return "";
+}
+
+std::string check_run_constants(const EffectList& list) {
+  int total = 0;
+  for (const EffectSpec& spec : list) {
+    const EffectInfo* info = info_of(spec);
+    total += info ? info->run_constants : 0;
+  }
+  if (total <= kMaxRunConstants) return "";
+  return "at most " + std::to_string(kMaxRunConstants) +
+         " per-run constants in one model (per_run_radius has 2, each random parameter of a custom "
+         "effect 1), got " + std::to_string(total);
 }
 
 void check_effects(const EffectList& list) {
@@ -140,6 +180,7 @@ void check_effects(const EffectList& list) {
     throw EffectError("effects", "at most " + std::to_string(kMaxEffects) + " effects, got " +
                                      std::to_string(list.size()));
   }
+  if (const std::string e = check_run_constants(list); !e.empty()) throw EffectError("effects", e);
   for (std::size_t i = 0; i < list.size(); ++i) {
     const std::string key = "effects[" + std::to_string(i) + "]." + list[i].name;
     if (const std::string error = check_effect(list[i]); !error.empty()) throw EffectError(key, error);
@@ -166,6 +207,11 @@ Motion MotionTracker::next(double dL_m, double dR_m, double dt_s, std::int64_t c
   m.turn = (diff > 0) - (diff < 0);
   m.r = travel > 0 ? std::abs(diff) / travel : 0.0;
   m.kappa_per_m = sum != 0 ? 2.0 * diff / (wheelbase_m_ * sum) : m.turn * HUGE_VAL;
+  m.turn_rad = diff / wheelbase_m_;
+  m.omega_radps = m.turn_rad / dt_s;
+  m.a_mps2 = (m.v_mps - v_mps_) / dt_s;  // the first of `count` equal increments; the rest: 0
+  m.theta_rad = theta_rad_;
+  m.heading0_rad = heading0_rad_;
   // A wheel reverses when it moves against its last direction of motion; standing still keeps it.
   auto wheel = [](double d, int& dir, double& since) {
     const int sign = (d > 0) - (d < 0);
@@ -185,7 +231,17 @@ Motion MotionTracker::next(double dL_m, double dR_m, double dt_s, std::int64_t c
   since_right_ += n * std::abs(dR_m);
   t_s_ += n * dt_s;
   s_m_ += n * 0.5 * travel;
+  theta_rad_ += n * m.turn_rad;
+  v_mps_ = m.v_mps;
   return m;
+}
+
+Systematic others_systematic(const PieceModel& piece, const Effect* self) {
+  Systematic s;
+  for (const auto& e : *piece.effects) {
+    if (e.get() != self) e->systematic(piece.motion, s);
+  }
+  return s;
 }
 
 void ResolvedPath::measure(Vector3& pose, Matrix3& P_world) const {
@@ -212,6 +268,15 @@ std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
 }
 
 }  // namespace effects
+
+std::string non_gaussian_effect(const EffectList& list) {
+  const auto objects = effects::instantiate(list);
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    if (std::string why = objects[i]->non_gaussian(); !why.empty()) return list[i].name + ": " + why;
+  }
+  return "";
+}
+
 FitCoordinate fit_coordinate(const EffectParameterInfo& p) {
   FitCoordinate c;
   const double scale = std::abs(p.typical - p.neutral);

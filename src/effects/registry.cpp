@@ -16,13 +16,15 @@ EffectType turn_dependent_wheelbase_type();
 EffectType backlash_type();
 EffectType reference_offset_type();
 EffectType group_variation_type();
+EffectType arc_skid_type();
+EffectType acceleration_slip_type();
 
 const std::vector<EffectType>& registry() {
   static const std::vector<EffectType> types{
       wheel_diameter_ratio_type(), wheelbase_error_type(), scale_error_type(),
       wheel_noise_correlation_type(), turn_slip_type(), per_run_radius_type(), bumps_type(),
       turn_dependent_wheelbase_type(), backlash_type(), reference_offset_type(),
-      group_variation_type(),
+      group_variation_type(), arc_skid_type(), acceleration_slip_type(),
   };
   return types;
 }

@@ -14,12 +14,13 @@ class TurnSlip final : public Effect {
  public:
   explicit TurnSlip(double k) : k_(k) {}
   bool stochastic() const override { return true; }
-  void perturb(WorldSample& s, RunState&, const Draws& draws) const override {
-    const double turned = std::abs(s.encoder_right - s.encoder_left) / s.wheelbase_nominal;
+  void terms(const LegView& leg, std::vector<TravelTerm>& out) const override {
+    const double turned = std::abs(leg.encoder_right - leg.encoder_left) / leg.wheelbase_nominal;
     if (turned == 0.0 || k_ == 0.0) return;
-    const double eta = k_ * std::sqrt(turned) * draws.normal(s.index, 0);
-    s.extra_left -= 0.5 * eta * s.wheelbase;
-    s.extra_right += 0.5 * eta * s.wheelbase;
+    // eta = k sqrt(turned) z moves the wheels by -/+ eta B'/2.
+    const double sd = k_ * std::sqrt(turned);
+    out.push_back({0, false, 0, sd, -0.5 * leg.wheelbase});
+    out.push_back({1, false, 0, sd, 0.5 * leg.wheelbase});
   }
   void model(PieceModel& piece) const override {
     piece.heading_var +=

@@ -13,8 +13,10 @@ class WheelNoiseCorrelation final : public Effect {
  public:
   explicit WheelNoiseCorrelation(double rho) : rho_(rho), orth_(std::sqrt(1.0 - rho * rho)) {}
   bool stochastic() const override { return true; }
-  void shape_noise(double& z_left, double& z_right) const override {
-    z_right = rho_ * z_left + orth_ * z_right;
+  bool noise_mix(double& from_left, double& from_right) const override {
+    from_left = rho_;  // z_R <- rho z_L + sqrt(1 - rho^2) z_R
+    from_right = orth_;
+    return true;
   }
   void model(PieceModel& piece) const override {
     const double c = rho_ * piece.noise.k_left * piece.noise.k_right *

@@ -90,15 +90,18 @@ Complex noise_mean_of_piece(Complex rotation, double d, double a, double v0, dou
                             double n_td) {
   // U = int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2)
   const double sinc_half = series::sinc(0.5 * a);
-  return noise_mean_of_piece(rotation, d, a, Complex(series::sinc(a), 0.5 * a * sinc_half * sinc_half),
+  return noise_mean_of_piece(rotation, d, 0.0, a, Complex(series::sinc(a), 0.5 * a * sinc_half * sinc_half),
                              v0, dv, n_td);
 }
 
-Complex noise_mean_of_piece(Complex rotation, double d, double a, Complex undamped, double v0,
-                            double dv, double n_td) {
+/// With a lateral slip l the deterministic drive is d + i l (both turn with the heading):
+///   e^{i theta0} [ D (d + i l + i n_td/2) - U (d + i l) ],
+/// the same rearrangement with drive = d + i (l + n_td/2).
+Complex noise_mean_of_piece(Complex rotation, double d, double lateral, double a, Complex undamped,
+                            double v0, double dv, double n_td) {
   const Complex extra = damped_minus_undamped(a, -0.5 * dv);  // D - U
   const Complex damped = undamped + extra;
-  const Complex drive(d, 0.5 * n_td);
+  const Complex drive(d, lateral + 0.5 * n_td);
   using detail::times;
   return times(rotation, series::expm1_small(-0.5 * v0) * times(damped, drive) + times(extra, drive) +
                              Complex(-0.5 * n_td * undamped.imag(), 0.5 * n_td * undamped.real()));

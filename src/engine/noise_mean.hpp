@@ -14,9 +14,11 @@ namespace odomcov::detail {
 std::complex<double> noise_mean_of_piece(std::complex<double> rotation, double d, double a,
                                          double v0, double dv, double n_td);
 /// The same with U = int_0^1 e^{i a u} du = sinc a + i (a/2) sinc^2(a/2) given (the engine has
-/// the sines already).
-std::complex<double> noise_mean_of_piece(std::complex<double> rotation, double d, double a,
-                                         std::complex<double> undamped, double v0, double dv,
-                                         double n_td);
+/// the sines already), for a piece that also slips `lateral` [m] to the left along its arc
+/// (effects' lateral slip): the slip turns with the heading error as the travel does, so it is
+/// damped by the same E[exp(i phi)] = exp(-V/2).
+std::complex<double> noise_mean_of_piece(std::complex<double> rotation, double d, double lateral,
+                                         double a, std::complex<double> undamped, double v0,
+                                         double dv, double n_td);
 
 }  // namespace odomcov::detail

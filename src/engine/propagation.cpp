@@ -47,40 +47,116 @@ using Complex = std::complex<double>;
 namespace effects {
 namespace {
 
-/// Walks the encoder pieces as the effects see them: each piece cut where a history effect
-/// changes its factors inside it (backlash taken up; split_at), and for every resulting piece
-/// calls each(encoder, motion, systematic) with its motion and the effects' systematic factors
-/// folded in. Without effects nothing reads the motion, and it is not computed.
+/// Walks the encoder pieces as the effects see them and calls each(encoder, motion, systematic)
+/// for every resulting piece, with its motion and every effect's systematic terms folded in:
+///  * a piece is cut where a history effect changes its terms inside it (backlash taken up;
+///    Effect::split_at), at most four times;
+///  * for effects whose terms vary smoothly with the history (Effect::refines: a custom
+///    expression in s, t, theta or heading), a piece is halved until evaluating the terms once
+///    at its middle gives their mean along it within kRefineTolerance: by Richardson, the error
+///    of the whole piece's value is 4/3 of its difference from the mean of its halves' values
+///    (midpoint rule, error O(h^2)), at most kMaxRefineDepth times.
+/// Every part keeps the acceleration of the piece it was cut from (Motion::a_mps2: a piece's own
+/// speed against the previous piece's; cutting for accuracy must not move it). Without effects
+/// nothing reads the motion, and it is not computed.
 template <class Each>
-void for_each_piece(const std::vector<ArcSegment>& encoder_pieces,
-                    const std::vector<double>& durations_s, double wheelbase_m,
-                    const std::vector<std::unique_ptr<Effect>>& active, Each&& each) {
-  bool splits = false;  // a history effect may cut pieces (split_at)
-  for (const auto& e : active) splits = splits || e->dependence() == Dependence::history;
-  MotionTracker tracker(wheelbase_m);
-  Motion motion;
-  auto one = [&](const ArcSegment& encoder, double dt) {
-    Systematic sys;
-    if (!active.empty()) {
-      motion = tracker.next(encoder.left_m, encoder.right_m, dt);
-      for (const auto& e : active) e->systematic(motion, sys);
+class PieceWalker {
+ public:
+  PieceWalker(double wheelbase_m, double heading0_rad, const std::vector<std::unique_ptr<Effect>>& active,
+              Each& each)
+      : tracker_(wheelbase_m, heading0_rad), active_(active), each_(each) {
+    for (const auto& e : active) {
+      splits_ = splits_ || e->dependence() == Dependence::history;
+      if (e->refines()) refining_.push_back(e.get());
     }
-    each(encoder, motion, sys);
-  };
-  for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
-    ArcSegment rest = encoder_pieces[i];
-    double dt = durations_s.empty() ? std::nan("") : durations_s[i];
-    for (int cut = 0; splits && cut < 4; ++cut) {
-      MotionTracker probe = tracker;
+  }
+
+  void piece(const ArcSegment& encoder, double dt) {
+    if (!splits_ && refining_.empty()) return one(encoder, dt, nullptr);
+    MotionTracker probe = tracker_;
+    const double a = active_.empty() ? 0.0 : probe.next(encoder.left_m, encoder.right_m, dt).a_mps2;
+    ArcSegment rest = encoder;
+    for (int cut = 0; splits_ && cut < 4; ++cut) {
+      probe = tracker_;
       const Motion whole = probe.next(rest.left_m, rest.right_m, dt);
       double f = 1.0;
-      for (const auto& e : active) f = std::min(f, e->split_at(whole));
+      for (const auto& e : active_) f = std::min(f, e->split_at(whole));
       if (!(f > 1e-12 && f < 1.0 - 1e-12)) break;
-      one({f * rest.left_m, f * rest.right_m}, f * dt);
+      refine({f * rest.left_m, f * rest.right_m}, f * dt, a, 0);
       rest = {(1.0 - f) * rest.left_m, (1.0 - f) * rest.right_m};
       dt *= 1.0 - f;
     }
-    one(rest, dt);
+    refine(rest, dt, a, 0);
+  }
+
+ private:
+  /// One piece to the caller; `a` (when given) replaces the motion's acceleration.
+  void one(const ArcSegment& encoder, double dt, const double* a) {
+    Systematic sys;
+    if (!active_.empty()) {
+      motion_ = tracker_.next(encoder.left_m, encoder.right_m, dt);
+      if (a) motion_.a_mps2 = *a;
+      for (const auto& e : active_) e->systematic(motion_, sys);
+    }
+    each_(encoder, motion_, sys);
+  }
+
+  void refine(const ArcSegment& encoder, double dt, double a, int depth) {
+    if (depth >= kMaxRefineDepth || linear_enough(encoder, dt, a)) return one(encoder, dt, &a);
+    const ArcSegment half{0.5 * encoder.left_m, 0.5 * encoder.right_m};
+    refine(half, 0.5 * dt, a, depth + 1);
+    refine(half, 0.5 * dt, a, depth + 1);
+  }
+
+  /// Whether one evaluation at the piece's middle gives every refining effect's mean terms
+  /// along it within kRefineTolerance.
+  bool linear_enough(const ArcSegment& encoder, double dt, double a) const {
+    if (refining_.empty()) return true;
+    MotionTracker probe = tracker_;
+    Motion whole = probe.next(encoder.left_m, encoder.right_m, dt);
+    probe = tracker_;
+    Motion first = probe.next(0.5 * encoder.left_m, 0.5 * encoder.right_m, 0.5 * dt);
+    Motion second = probe.next(0.5 * encoder.left_m, 0.5 * encoder.right_m, 0.5 * dt);
+    whole.a_mps2 = first.a_mps2 = second.a_mps2 = a;
+    for (const Effect* e : refining_) {
+      Systematic w, x, y;
+      e->systematic(whole, w);
+      e->systematic(first, x);
+      e->systematic(second, y);
+      const double terms[][3] = {{w.scale_left, x.scale_left, y.scale_left},
+                                 {w.scale_right, x.scale_right, y.scale_right},
+                                 {w.wheelbase_factor, x.wheelbase_factor, y.wheelbase_factor},
+                                 {w.lateral, x.lateral, y.lateral},
+                                 {w.noise_factor, x.noise_factor, y.noise_factor}};
+      for (const auto& t : terms) {
+        if (!(4.0 / 3.0 * std::abs(t[0] - 0.5 * (t[1] + t[2])) <= kRefineTolerance)) return false;
+      }
+    }
+    return true;
+  }
+
+  MotionTracker tracker_;
+  const std::vector<std::unique_ptr<Effect>>& active_;
+  Each& each_;
+  bool splits_ = false;  // a history effect may cut pieces (split_at)
+  std::vector<const Effect*> refining_;
+  Motion motion_;
+};
+
+/// Runs a PieceWalker over the encoder pieces (durations as resolve takes them).
+template <class Each>
+void for_each_piece(const std::vector<ArcSegment>& encoder_pieces,
+                    const std::vector<double>& durations_s, double wheelbase_m, double heading0_rad,
+                    const std::vector<std::unique_ptr<Effect>>& active, Each&& each) {
+  if (active.empty()) {  // the common plain model: no motion, no terms, no cuts
+    const Motion none;
+    const Systematic identity;
+    for (const ArcSegment& piece : encoder_pieces) each(piece, none, identity);
+    return;
+  }
+  PieceWalker<std::remove_reference_t<Each>> walker(wheelbase_m, heading0_rad, active, each);
+  for (std::size_t i = 0; i < encoder_pieces.size(); ++i) {
+    walker.piece(encoder_pieces[i], durations_s.empty() ? std::nan("") : durations_s[i]);
   }
 }
 
@@ -97,30 +173,32 @@ std::vector<std::shared_ptr<const Effect>> measurement_effects(std::vector<std::
 
 ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
                      const std::vector<double>& durations_s, const Robot& robot,
-                     const EffectList& effect_list) {
+                     const EffectList& effect_list, double heading0_rad) {
   auto active = instantiate(effect_list);
   ResolvedPath out;
   for (const auto& e : active) out.run_constants += e->run_constants();
-  if (out.run_constants > kMaxRunConstants) {
-    throw std::logic_error("resolve: more per-run constants than kMaxRunConstants");
+  if (out.run_constants > kMaxRunConstants) {  // check_effects (instantiate) refuses such lists
+    throw std::logic_error("resolve: more per-run constants than EffectInfo::run_constants says");
   }
   const double B = robot.wheelbase_m;
   out.pieces.reserve(encoder_pieces.size());
+  out.input_columns.reserve(3 * static_cast<std::size_t>(out.run_constants) * encoder_pieces.size());
   // One PieceModel serves every piece: its run columns keep their storage, so the loop does
   // not allocate.
   PieceModel m;
   double inverse_for = 0.0, inverse = 0.0;  // 1/b for the true wheelbase b = inverse_for
   m.wheelbase_m = B;
   m.noise = robot.noise;
-  for_each_piece(encoder_pieces, durations_s, B, active,
+  m.effects = &active;
+  for_each_piece(encoder_pieces, durations_s, B, heading0_rad, active,
                  [&](const ArcSegment& encoder, const Motion& motion, const Systematic& sys) {
     m.encoder = encoder;
-    m.motion = motion;
+    if (!active.empty()) m.motion = motion;  // only the effects read it
     m.scale_left = sys.scale_left;
     m.scale_right = sys.scale_right;
     m.wheelbase_factor = sys.wheelbase_factor;
     m.wheel_cov.setZero();
-    m.wheel_cov.diagonal() = wheel_variances(encoder, robot.noise);
+    m.wheel_cov.diagonal() = wheel_variances(encoder, robot.noise) * sys.noise_factor;
     m.heading_var = 0.0;
     m.run_columns.clear();
     for (const auto& e : active) e->model(m);
@@ -129,6 +207,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
     const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
     r.wheelbase_true_m = m.wheelbase_factor * B;
     r.center_m = travel.center_m();
+    if (sys.lateral != 0.0) r.lateral_m = sys.lateral * 0.5 * (std::abs(encoder.left_m) + std::abs(encoder.right_m));
     r.angle_rad = travel.heading_change_rad(r.wheelbase_true_m);
     if (r.wheelbase_true_m != inverse_for) {  // 1/b changes only with the wheelbase factor
       inverse_for = r.wheelbase_true_m;
@@ -141,10 +220,9 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
     r.intensity(0, 0) = (w11 - 2.0 * w12 + w22) * inverse * inverse + m.heading_var;
     r.intensity(0, 1) = r.intensity(1, 0) = 0.5 * (w22 - w11) * inverse;
     r.intensity(1, 1) = 0.25 * (w11 + 2.0 * w12 + w22);
-    r.input_columns.resize(2, out.run_constants);
     for (int c = 0; c < out.run_constants; ++c) {
-      const Eigen::Vector2d& w = m.run_columns.at(static_cast<std::size_t>(c));
-      r.input_columns.col(c) << (w.y() - w.x()) * inverse, 0.5 * (w.x() + w.y());
+      const Eigen::Vector3d& w = m.run_columns.at(static_cast<std::size_t>(c));
+      out.input_columns.insert(out.input_columns.end(), {(w.y() - w.x()) * inverse, 0.5 * (w.x() + w.y()), w.z()});
     }
   });
   out.measurement_effects = measurement_effects(active);
@@ -165,9 +243,13 @@ class PoseWalker {
   static constexpr int kExactEvery = 16;
   const Vector3& pose() const { return pose_; }
   Complex rotation() const { return rotation_; }
-  /// Composes the piece of centre travel d whose angle functions are f.
-  void step(double d, const detail::ArcStep& f) {
-    const double x = f.chord_x(d), y = f.chord_y(d);
+  /// Composes the piece of centre travel d and lateral slip l whose angle functions are f.
+  void step(double d, const detail::ArcStep& f, double l = 0.0) {
+    double x = f.chord_x(d), y = f.chord_y(d);
+    if (l != 0.0) {  // (d + i l) U(a): ArcStep::chord_x(d, l), chord_y(d, l)
+      x -= f.chord_y(l);
+      y += f.chord_x(l);
+    }
     const double c = rotation_.real(), s = rotation_.imag();
     pose_ = {pose_.x() + c * x - s * y, pose_.y() + s * x + c * y, pose_.z() + f.angle};
     if (++count_ == kExactEvery) {
@@ -184,10 +266,16 @@ class PoseWalker {
   int count_ = 0;
 };
 
-/// phi P phi^T for the arc transition phi = [c s y; -s c x; 0 0 1] (arc_transition) and a
-/// symmetric P, written out: the zeros and ones of phi cost nothing.
-Matrix3 transition_congruence(const detail::ArcStep& f, double d, const Matrix3& P) {
-  const double c = f.cos1, s = f.sin1, x = f.chord_x(d), y = f.chord_y(d);
+/// phi P phi^T for the arc transition phi = [c s y; -s c x; 0 0 1] (arc_transition, with the
+/// lateral slip l in its third column) and a symmetric P, written out: the zeros and ones of phi
+/// cost nothing.
+Matrix3 transition_congruence(const detail::ArcStep& f, double d, double l, const Matrix3& P) {
+  const double c = f.cos1, s = f.sin1;
+  double x = f.chord_x(d), y = f.chord_y(d);
+  if (l != 0.0) {
+    x += f.chord_y(l);
+    y -= f.chord_x(l);
+  }
   // M = phi P (rows 0 and 1; row 2 is P's)
   double m0[3], m1[3];
   for (int j = 0; j < 3; ++j) {
@@ -210,8 +298,8 @@ Matrix3 transition_congruence(const detail::ArcStep& f, double d, const Matrix3&
 /// The engine's loop; `each` (when not nullptr) sees the prediction after every piece.
 template <class Each>
 Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                     const Robot& robot, const EffectList& effect_list, Each&& each) {
-  const effects::ResolvedPath path = effects::resolve(pieces, durations_s, robot, effect_list);
+                     const Robot& robot, const EffectList& effect_list, double heading0_rad, Each&& each) {
+  const effects::ResolvedPath path = effects::resolve(pieces, durations_s, robot, effect_list, heading0_rad);
   const int constants = path.run_constants;
   const double B = robot.wheelbase_m;
 
@@ -222,30 +310,33 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
       Eigen::MatrixXd::Zero(3, constants);
   PoseWalker true_pose, odometry;
   Complex noise_mean = 0.0;
-  for (const effects::ResolvedPiece& r : path.pieces) {
+  for (std::size_t k = 0; k < path.pieces.size(); ++k) {
+    const effects::ResolvedPiece& r = path.pieces[k];
     const double d = r.center_m;
+    const double l = r.lateral_m;
     const double a = r.angle_rad;
     // One evaluation of the angle's functions serves every kernel below.
     const detail::ArcFunctions f(a);
-    const Matrix3 q = detail::arc_noise_covariance(d, f, r.intensity);
+    const Matrix3 q = l == 0.0 ? detail::arc_noise_covariance(d, f, r.intensity)
+                               : detail::arc_noise_covariance(d, l, f, r.intensity);
     const double v0 = P(2, 2);
     if (constants == 0) {
-      P = transition_congruence(f, d, P) + q;
+      P = transition_congruence(f, d, l, P) + q;
     } else {
-      const Matrix3 phi = detail::arc_transition(d, f);
+      const Matrix3 phi = detail::arc_transition(d, l, f);
       const Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, effects::kMaxRunConstants> A =
-          detail::arc_input_gain(d, f) * r.input_columns;
+          detail::arc_input_gain(d, l, f) * path.columns(k);
       const Matrix3 cross = phi * C * A.transpose();
       P = phi * P * phi.transpose() + cross + cross.transpose() + A * A.transpose() + q;
       C = phi * C + A;
     }
     const Complex undamped(f.sinc1, 0.5 * a * f.sinc_half * f.sinc_half);  // int_0^1 e^{i a u} du
-    noise_mean += detail::noise_mean_of_piece(true_pose.rotation(), d, a, undamped, v0, P(2, 2) - v0,
+    noise_mean += detail::noise_mean_of_piece(true_pose.rotation(), d, l, a, undamped, v0, P(2, 2) - v0,
                                               r.intensity(0, 1));
-    true_pose.step(d, f);
+    true_pose.step(d, f, l);
     // The odometry's piece: the same arc unless a systematic effect changed the true one.
     const double d_odometry = r.encoder.center_m(), a_odometry = r.encoder.heading_change_rad(B);
-    if (d_odometry == d && a_odometry == a) {
+    if (d_odometry == d && a_odometry == a && l == 0.0) {
       odometry.step(d, f);
     } else {
       odometry.step(d_odometry, detail::ArcStep(a_odometry));
@@ -270,22 +361,23 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
 
 Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                      const Robot& robot, const EffectList& effect_list,
-                     const Vector3* odometry_end_pose) {
+                     const Vector3* odometry_end_pose, double heading0_rad) {
   // resolve's pieces, streamed: only their true arcs (the same arithmetic), nothing stored.
   auto active = effects::instantiate(effect_list);
   const double B = robot.wheelbase_m;
   const bool odometry_given = odometry_end_pose != nullptr;
   PoseWalker true_pose, odometry;
-  effects::for_each_piece(pieces, durations_s, B, active,
+  effects::for_each_piece(pieces, durations_s, B, heading0_rad, active,
                           [&](const ArcSegment& encoder, const effects::Motion&,
                               const effects::Systematic& sys) {
     const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
     const double center = travel.center_m(), angle = travel.heading_change_rad(sys.wheelbase_factor * B);
+    const double lateral = sys.lateral * 0.5 * (std::abs(encoder.left_m) + std::abs(encoder.right_m));
     const detail::ArcStep f(angle);
-    true_pose.step(center, f);
+    true_pose.step(center, f, lateral);
     if (odometry_given) return;
     const double d_odometry = encoder.center_m(), a_odometry = encoder.heading_change_rad(B);
-    if (d_odometry == center && a_odometry == angle) {
+    if (d_odometry == center && a_odometry == angle && lateral == 0.0) {
       odometry.step(center, f);
     } else {
       odometry.step(d_odometry, detail::ArcStep(a_odometry));
@@ -301,22 +393,30 @@ Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<do
 
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effect_list) {
-  return propagate(pieces, {}, robot, effect_list, nullptr);
+  return propagate(pieces, {}, robot, effect_list, 0.0, nullptr);
 }
 
 Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                   const Robot& robot, const EffectList& effect_list) {
-  return propagate(pieces, durations_s, robot, effect_list, nullptr);
+                   const Robot& robot, const EffectList& effect_list, double heading0_rad) {
+  return propagate(pieces, durations_s, robot, effect_list, heading0_rad, nullptr);
 }
 
 std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,
                                            const std::vector<double>& durations_s,
-                                           const Robot& robot, const EffectList& effect_list) {
+                                           const Robot& robot, const EffectList& effect_list,
+                                           double heading0_rad) {
   std::vector<Prediction> out;
   out.reserve(pieces.size() + 1);
   out.emplace_back();  // the start: exactly known
-  propagate(pieces, durations_s, robot, effect_list, [&out](const Prediction& p) { out.push_back(p); });
+  propagate(pieces, durations_s, robot, effect_list, heading0_rad,
+            [&out](const Prediction& p) { out.push_back(p); });
   return out;
+}
+
+std::vector<ArcSegment> path_model_pieces(const Path& path, double wheelbase_m, const EffectList& effects,
+                                          std::vector<double>* durations_s) {
+  return effect_needs(effects).sample_pieces ? sample_model_pieces(path, wheelbase_m, durations_s)
+                                             : model_pieces(path, wheelbase_m, durations_s);
 }
 
 }  // namespace odomcov

@@ -1,5 +1,6 @@
 #include "odomcov/io/config_io.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -12,6 +13,13 @@ namespace odomcov {
 namespace {
 
 using yaml::Where;
+
+/// "a, b, c".
+std::string join(const std::vector<std::string>& names) {
+  std::string out;
+  for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
 
 constexpr double kDefaultSpeedMps = 0.5;
 
@@ -89,9 +97,34 @@ PathSegment parse_segment(const Where& where, const YAML::Node& node) {
   return segment;
 }
 
-/// `- custom: {name, parameters: {p: start}, scale, scale_left, scale_right, wheelbase_factor}`.
+/// A custom effect's `random: {p: sd}`: each key a parameter of the effect, each sd a number
+/// >= 0; appended to `def.random` and `sds` in the order written.
+void parse_random(const Where& where, const YAML::Node& node, CustomEffect& def, std::vector<double>& sds) {
+  const Where random_where = where.child("random");
+  const YAML::Node random = node["random"];
+  if (!random.IsMap()) yaml::fail(random_where, random, "expected a map {parameter: sd}");
+  for (const auto& entry : random) {
+    const std::string p = entry.first.Scalar();
+    const Where p_where = random_where.child(p);
+    if (std::find(def.parameters.begin(), def.parameters.end(), p) == def.parameters.end()) {
+      yaml::fail(p_where, entry.first, "not a parameter of the effect (its parameters: " +
+                                           (def.parameters.empty() ? std::string("none") : join(def.parameters)) + ")");
+    }
+    const double sd = yaml::to_number(p_where, entry.second);
+    if (!(sd >= 0.0)) yaml::fail(p_where, entry.second, "the sd must be >= 0, got " + format_number(sd));
+    if (def.random.size() == kMaxRandomParameters) {
+      yaml::fail(p_where, entry.first, "at most " + std::to_string(kMaxRandomParameters) + " parameters drawn per run");
+    }
+    def.random.push_back(p);
+    sds.push_back(sd);
+  }
+}
+
+/// `- custom: {name, parameters: {p: start}, random: {p: sd}, scale, scale_left, scale_right,
+/// wheelbase_factor, lateral, noise}`.
 EffectSpec parse_custom(const Where& where, const YAML::Node& node) {
-  yaml::require_map(where, node, {"name", "parameters", "scale", "scale_left", "scale_right", "wheelbase_factor"});
+  yaml::require_map(where, node, {"name", "parameters", "random", "scale", "scale_left", "scale_right",
+                                  "wheelbase_factor", "lateral", "noise"});
   CustomEffect def;
   def.file = where.file;
   def.line = yaml::line_of(node);
@@ -110,10 +143,9 @@ EffectSpec parse_custom(const Where& where, const YAML::Node& node) {
       start.push_back(yaml::to_number(params_where.child(p), entry.second));
     }
   }
+  if (node["random"]) parse_random(where, node, def, start);
   bool any = false;
-  for (const auto& [k, e] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
-                             std::pair{"scale_right", &def.scale_right},
-                             std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
+  for (const auto& [k, e] : def.expressions()) {
     const YAML::Node expr = node[k];
     if (!expr) continue;
     const Where expr_where = where.child(k);
@@ -124,7 +156,9 @@ EffectSpec parse_custom(const Where& where, const YAML::Node& node) {
     }
     any = true;
   }
-  if (!any) yaml::fail(where, node, "give at least one of scale, scale_left, scale_right, wheelbase_factor");
+  if (!any) {
+    yaml::fail(where, node, "give at least one of scale, scale_left, scale_right, wheelbase_factor, lateral, noise");
+  }
   return define_custom_effect(std::move(def), start);
 }
 
@@ -230,6 +264,7 @@ EffectList parse_effects(const YAML::Node& node, const std::string& file, const 
     list.push_back(std::move(spec));
   }
   if (list.size() > kMaxEffects) yaml::fail(where, node, "at most " + std::to_string(kMaxEffects) + " effects");
+  if (const std::string e = check_run_constants(list); !e.empty()) yaml::fail(where, node, e);
   check_group_target_at(where, node, list);
   return list;
 }

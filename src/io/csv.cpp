@@ -81,23 +81,33 @@ double Row::number(std::size_t i) const {
 }
 
 Table read(const std::string& file, const std::vector<std::string>& columns) {
+  return read(file, columns, "");
+}
+
+Table read(const std::string& file, const std::vector<std::string>& columns, const std::string& optional) {
   auto meta = std::make_shared<Meta>(Meta{file, columns});
   Table table{meta, {}};
   int number = 0;
   bool header = false;
+  std::vector<std::string> with_optional = columns;
+  with_optional.push_back(optional);
   for (const std::string& line : lines_of(file)) {
     ++number;
     if (trim(line).empty()) continue;
     std::vector<std::string> cells = split(line);
     if (!header) {
-      if (cells != columns) {
-        fail(file, number, "", "expected the header '" + joined(columns) + "', got " + quote(trim(line)));
+      if (!optional.empty() && cells == with_optional) {
+        meta->columns = with_optional;
+      } else if (cells != columns) {
+        fail(file, number, "",
+             "expected the header '" + joined(columns) + "'" +
+                 (optional.empty() ? "" : " or '" + joined(with_optional) + "'") + ", got " + quote(trim(line)));
       }
       header = true;
       continue;
     }
-    if (cells.size() != columns.size()) {
-      fail(file, number, "", "expected " + std::to_string(columns.size()) + " cells, got " +
+    if (cells.size() != meta->columns.size()) {
+      fail(file, number, "", "expected " + std::to_string(meta->columns.size()) + " cells, got " +
                                  std::to_string(cells.size()));
     }
     table.rows.push_back({meta, number, std::move(cells)});

@@ -35,6 +35,9 @@ struct Table {
 /// Reads `file`: the header must be exactly `columns` (spaces around names ignored), every row
 /// must have that many cells, and there must be at least one row. Blank lines are skipped.
 Table read(const std::string& file, const std::vector<std::string>& columns);
+/// The same with an optional last column: the header is `columns`, or `columns` then
+/// `optional` (the table's meta lists the columns the file has).
+Table read(const std::string& file, const std::vector<std::string>& columns, const std::string& optional);
 
 /// Reads a headerless numeric CSV (recordings): every row must have `min_cells` cells or more.
 Table read_headerless(const std::string& file, std::size_t min_cells);

@@ -159,7 +159,10 @@ ConvertedRun write_run(const InputLog& log, double t_start, double t_end, const 
   const Vector3 start = reference_at(log.refs, t_start);
 
   ConvertedRun out;
-  out.log = "t,left,right,x,y,theta\n" + number(t_start) + ",0,0,0,0,0\n";
+  // The start heading in the reference's own frame (its heading at the run's start, wrapped to
+  // (-pi, pi]), which the start frame drops: the log's heading0, on the first row only.
+  out.log = "t,left,right,x,y,theta,heading0\n" + number(t_start) + ",0,0,0,0,0," +
+            number(wrap_angle(start.z())) + "\n";
   double left_prev = 0, right_prev = 0;
   Vector3 counted = Vector3::Zero();  // last reference pose counted into the travel
   Vector3 last_ref = Vector3::Zero();
@@ -174,14 +177,14 @@ ConvertedRun write_run(const InputLog& log, double t_start, double t_end, const 
     out.log += number(in.t) + "," + number(left) + "," + number(right);
     if (in.reference) {
       const Vector3 p = in_start_frame(in.pose, start);
-      out.log += "," + number(p.x()) + "," + number(p.y()) + "," + number(p.z());
+      out.log += "," + number(p.x()) + "," + number(p.y()) + "," + number(p.z()) + ",";
       if (reference_step(counted, p, half_b) >= kReferenceStepM) {
         out.reference_travel_m += reference_step(counted, p, half_b);
         counted = p;
       }
       last_ref = p;
     } else {
-      out.log += ",,,";
+      out.log += ",,,,";
     }
     out.log += "\n";
   }
@@ -312,7 +315,8 @@ EncoderLog load_encoder_log(const std::string& file, double left_scale, double r
       columns = {"t", "left", "right", "x", "y", "theta"};
     }
   }
-  const csv::Table table = csv::read(file, columns);
+  // A suite's log may end with heading0 (the start heading, first row): read and ignored here.
+  const csv::Table table = columns.size() == 6 ? csv::read(file, columns, "heading0") : csv::read(file, columns);
   EncoderLog log;
   for (const csv::Row& row : table.rows) {
     const double t = row.number(0);

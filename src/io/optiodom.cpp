@@ -194,14 +194,26 @@ Run read_run(const fs::path& run_file, const Nominal& robot) {
   return run;
 }
 
-/// What must hold of a whole run: its end pose (the only one written) within the loader's
-/// limits, two rows or more, and its pieces within the loader's limits at the wheelbase.
+/// The run's end pose in its start frame: R(theta0)^T (p - p0), theta - theta0, with
+/// (p0, theta0) the first row's reference pose.
+Vector3 end_in_start_frame(const Run& run) {
+  const Vector3& start = run.rows.front().reference;
+  const Vector3& end = run.rows.back().reference;
+  const double c = std::cos(start.z()), s = std::sin(start.z());
+  const double dx = end.x() - start.x(), dy = end.y() - start.y();
+  return {c * dx + s * dy, -s * dx + c * dy, end.z() - start.z()};
+}
+
+/// What must hold of a whole run: its end pose in its start frame (the only one written) and
+/// its start heading within the loader's limits, two rows or more, and its pieces within the
+/// loader's limits at the wheelbase.
 void check_run(const fs::path& run_file, const Run& run, double wheelbase) {
   if (!run.rows.empty()) {
     const RunRow& last = run.rows.back();
+    const Vector3 end = end_in_start_frame(run);
     const char* const columns[3] = {"x", "y", "theta"};
     for (int k = 0; k < 3; ++k) {
-      if (const std::string e = limits::check_length(last.reference[k]); !e.empty()) {
+      if (const std::string e = limits::check_length(end[k]); !e.empty()) {
         csv::fail(run_file.string(), last.line, columns[k], e);
       }
     }
@@ -214,21 +226,26 @@ void check_run(const fs::path& run_file, const Run& run, double wheelbase) {
 }
 
 /// The suite's log of a run: t and the cumulative left and right travel per row, the
-/// OptiTrack end pose in the last row only.
+/// OptiTrack end pose in the run's start frame (the first row's pose) in the last row only, and
+/// the start heading in OptiTrack's frame (the first row's theta) as heading0 on the first row.
+/// The published recordings give every pose relative to the run's start, so their first row is
+/// (0, 0, 0): the end pose is the recorded one and heading0 is 0 (the absolute heading is not
+/// in the data).
 std::string run_log(const Run& run) {
-  std::string log = "t,left,right,x,y,theta\n";
+  std::string log = "t,left,right,x,y,theta,heading0\n";
+  const Vector3& start = run.rows.front().reference;
   for (std::size_t i = 0; i < run.rows.size(); ++i) {
     const RunRow& row = run.rows[i];
     // %.17g: Unix timestamps (1.7e9 s at 20 Hz) need more than ten digits to stay distinct.
     log += format_number(row.t, "%.17g") + "," + format_number(row.left, "%.17g") + "," +
            format_number(row.right, "%.17g");
     if (i + 1 == run.rows.size()) {
-      log += "," + format_number(row.reference.x()) + "," + format_number(row.reference.y()) + "," +
-             format_number(row.reference.z());
+      const Vector3 end = end_in_start_frame(run);
+      log += "," + format_number(end.x()) + "," + format_number(end.y()) + "," + format_number(end.z());
     } else {
       log += ",,,";
     }
-    log += "\n";
+    log += i == 0 ? "," + format_number(wrap_angle(start.z()), "%.17g") + "\n" : ",\n";
   }
   return log;
 }

@@ -30,8 +30,17 @@ void check_pose(const std::string& file, const csv::Row& row, std::size_t first_
   }
 }
 
+/// The optional `heading0` cell of a row (column `c`): the run's start heading in the
+/// reference's frame [rad], a finite number at most kMaxTurn_rad in magnitude (limits.hpp).
+double heading0_of(const std::string& file, const csv::Row& row, std::size_t c) {
+  const double h = row.number(c);
+  if (const std::string e = limits::check_angle(h); !e.empty()) csv::fail(file, row.line, "heading0", e);
+  return h;
+}
+
 std::vector<SuiteRun> load_measurements(const std::string& csv_file) {
-  const csv::Table table = csv::read(csv_file, {"run", "x", "y", "theta"});
+  const csv::Table table = csv::read(csv_file, {"run", "x", "y", "theta"}, "heading0");
+  const bool has_heading0 = table.meta->columns.size() == 5;
   std::vector<SuiteRun> runs;
   std::set<std::string> ids;
   for (const csv::Row& row : table.rows) {
@@ -43,15 +52,35 @@ std::vector<SuiteRun> load_measurements(const std::string& csv_file) {
     }
     run.measured = {row.number(1), row.number(2), row.number(3)};
     check_pose(csv_file, row, 1);
+    if (has_heading0) {
+      run.heading0_rad = heading0_of(csv_file, row, 4);
+      run.heading0_given = true;
+    }
     runs.push_back(std::move(run));
   }
   return runs;
 }
 
+/// A log's optional `heading0` column: the run's start heading, on the first row only (it is
+/// one value per run); empty there means unknown (0).
+void read_log_heading0(const std::string& log_file, const csv::Table& table, SuiteRun& run) {
+  if (table.meta->columns.size() != 7) return;
+  for (std::size_t i = 1; i < table.rows.size(); ++i) {
+    if (!table.rows[i].empty(6)) {
+      csv::fail(log_file, table.rows[i].line, "heading0",
+                "the run's start heading goes on the first row only (one value per run)");
+    }
+  }
+  if (table.rows[0].empty(6)) return;
+  run.heading0_rad = heading0_of(log_file, table.rows[0], 6);
+  run.heading0_given = true;
+}
+
 SuiteRun load_log(const std::string& log_file) {
-  const csv::Table table = csv::read(log_file, {"t", "left", "right", "x", "y", "theta"});
+  const csv::Table table = csv::read(log_file, {"t", "left", "right", "x", "y", "theta"}, "heading0");
   SuiteRun run;
   run.id = std::filesystem::path(log_file).stem().string();
+  read_log_heading0(log_file, table, run);
   double t = 0, left = 0, right = 0;
   int reference_line = 0;
   std::size_t reference_pieces = 0;

@@ -12,6 +12,27 @@ namespace {
 /// Enough digits that any value typed with up to 15 significant digits reads back exactly.
 constexpr int kYamlDigits = 15;
 
+/// A custom effect's definition (inside its flow map): name, parameters with their values,
+/// random with each sd, then its expressions.
+void emit_custom(YAML::Emitter& out, const EffectSpec& e) {
+  const CustomEffect& def = *e.custom;
+  out << YAML::Key << "name" << YAML::Value << e.name << YAML::Key << "parameters" << YAML::Value << YAML::BeginMap;
+  for (std::size_t i = 0; i < def.parameters.size(); ++i) {
+    out << YAML::Key << def.parameters[i] << YAML::Value << e.values[i];
+  }
+  out << YAML::EndMap;
+  if (!def.random.empty()) {
+    out << YAML::Key << "random" << YAML::Value << YAML::BeginMap;
+    for (std::size_t j = 0; j < def.random.size(); ++j) {
+      out << YAML::Key << def.random[j] << YAML::Value << e.values[def.parameters.size() + j];
+    }
+    out << YAML::EndMap;
+  }
+  for (const auto& [key, x] : def.expressions()) {
+    if (!x->text.empty()) out << YAML::Key << key << YAML::Value << YAML::DoubleQuoted << x->text;
+  }
+}
+
 void emit_effects(YAML::Emitter& out, const EffectList& effects) {
   out << YAML::BeginSeq;
   for (const EffectSpec& e : effects) {
@@ -21,18 +42,12 @@ void emit_effects(YAML::Emitter& out, const EffectList& effects) {
     }
     out << YAML::BeginMap << YAML::Key << (e.custom ? "custom" : e.name) << YAML::Value << YAML::Flow
         << YAML::BeginMap;
-    if (e.custom) out << YAML::Key << "name" << YAML::Value << e.name << YAML::Key << "parameters" << YAML::Value << YAML::BeginMap;
-    if (!e.target.empty()) out << YAML::Key << "parameter" << YAML::Value << e.target;
-    for (std::size_t i = 0; i < e.values.size(); ++i) {
-      out << YAML::Key << info->parameters[i].name << YAML::Value << e.values[i];
-    }
     if (e.custom) {
-      out << YAML::EndMap;
-      const CustomEffect& def = *e.custom;
-      for (const auto& [key, x] : {std::pair{"scale", &def.scale}, std::pair{"scale_left", &def.scale_left},
-                                   std::pair{"scale_right", &def.scale_right},
-                                   std::pair{"wheelbase_factor", &def.wheelbase_factor}}) {
-        if (!x->text.empty()) out << YAML::Key << key << YAML::Value << YAML::DoubleQuoted << x->text;
+      emit_custom(out, e);
+    } else {
+      if (!e.target.empty()) out << YAML::Key << "parameter" << YAML::Value << e.target;
+      for (std::size_t i = 0; i < e.values.size(); ++i) {
+        out << YAML::Key << info->parameters[i].name << YAML::Value << e.values[i];
       }
     }
     out << YAML::EndMap << YAML::EndMap;

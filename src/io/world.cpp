@@ -6,8 +6,10 @@
 #include <filesystem>
 #include <regex>
 #include <set>
+#include <stdexcept>
 
 #include "odomcov/base/format.hpp"
+#include "odomcov/closed_form/limits.hpp"
 #include "odomcov/engine/simulator.hpp"
 #include "odomcov/io/suite_writer.hpp"
 #include "odomcov/io/config_io.hpp"
@@ -19,6 +21,29 @@ namespace odomcov {
 namespace {
 
 using yaml::Where;
+
+/// An experiment's `heading0:` [rad]: a number, or {uniform: [lo, hi]} with lo < hi, each at most
+/// kMaxTurn_rad in magnitude (limits.hpp).
+StartHeading parse_start_heading(const Where& where, const YAML::Node& node) {
+  StartHeading h;
+  h.given = true;
+  if (node.IsScalar()) {
+    h.lo = h.hi = yaml::to_number(where, node);
+    if (const std::string e = limits::check_angle(h.lo); !e.empty()) yaml::fail(where, node, e);
+    return h;
+  }
+  yaml::require_map(where, node, {"uniform"});
+  const Where uw = where.child("uniform");
+  const YAML::Node range = yaml::require(where, node, "uniform");
+  if (!range.IsSequence() || range.size() != 2) yaml::fail(uw, range, "expected [lo, hi] in rad");
+  h.lo = yaml::to_number(uw.index(0), range[0]);
+  h.hi = yaml::to_number(uw.index(1), range[1]);
+  for (std::size_t i = 0; i < 2; ++i) {
+    if (const std::string e = limits::check_angle(i ? h.hi : h.lo); !e.empty()) yaml::fail(uw.index(i), range[i], e);
+  }
+  if (!(h.lo < h.hi)) yaml::fail(uw, range, "needs lo < hi");
+  return h;
+}
 
 }  // namespace
 
@@ -54,8 +79,9 @@ WorldFile load_world_unguarded(const std::string& file) {
   for (std::size_t i = 0; i < list.size(); ++i) {
     const Where xw = ew.index(i);
     const YAML::Node node = list[i];
-    yaml::require_map(xw, node, {"name", "runs", "path", "group", "kind"});
+    yaml::require_map(xw, node, {"name", "runs", "path", "group", "kind", "heading0"});
     WorldExperiment ex;
+    ex.line = yaml::line_of(node);
     ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
     if (!std::regex_match(ex.name, safe_name)) {
       yaml::fail(xw.child("name"), node["name"], "use letters, digits, '_', '.' or '-' (it names a file)");
@@ -75,10 +101,47 @@ WorldFile load_world_unguarded(const std::string& file) {
     check_simulation_size(file, yaml::line_of(node["runs"]), xw.child("runs").key, ex.runs,
                           sample_count(ex.path));
     ex.path_yaml = YAML::Dump(node["path"]);
+    if (node["heading0"]) ex.heading0 = parse_start_heading(xw.child("heading0"), node["heading0"]);
     w.experiments.push_back(std::move(ex));
   }
   return w;
 }
+
+std::vector<double> start_headings(const WorldFile& w, std::size_t experiment) {
+  const WorldExperiment& ex = w.experiments.at(experiment);
+  if (!ex.heading0.given) return {};
+  const auto key = random::key_from_seed(random::derive_seed(w.seed, experiment));
+  std::vector<double> out;
+  for (std::int64_t r = 0; r < ex.runs; ++r) {
+    const double u = ex.heading0.lo == ex.heading0.hi
+                         ? 0.0
+                         : random::uniform_at(key, static_cast<std::uint64_t>(r), 0, random::kTagStartHeading);
+    out.push_back(ex.heading0.lo + (ex.heading0.hi - ex.heading0.lo) * u);
+  }
+  return out;
+}
+
+namespace {
+
+/// The simulated errors of an experiment's runs: one batch when every run starts alike for
+/// the effects, else run by run from each run's own start heading (Simulator::reference_error
+/// gives run r's numbers exactly as the batch would).
+std::vector<Vector3> simulated_errors(const WorldFile& w, const WorldExperiment& ex, const EffectList& effects,
+                                      const std::vector<double>& heading0, std::uint64_t seed, int threads,
+                                      Vector3& odometry) {
+  const Robot robot{w.robot.wheelbase_m, w.world.noise};
+  const bool per_run = !heading0.empty() && ex.heading0.lo != ex.heading0.hi && effect_needs(effects).start_heading;
+  const Simulator batch(robot, ex.path, effects, heading0.empty() ? 0.0 : heading0.front());
+  odometry = batch.odometry_end_pose();
+  if (!per_run) return batch.errors(seed, 0, ex.runs, threads);
+  std::vector<Vector3> errors;
+  for (std::int64_t r = 0; r < ex.runs; ++r) {
+    errors.push_back(Simulator(robot, ex.path, effects, heading0[static_cast<std::size_t>(r)]).reference_error(seed, r));
+  }
+  return errors;
+}
+
+}  // namespace
 
 std::vector<Vector3> synthesize(const WorldFile& w, std::size_t experiment, int threads) {
   const WorldExperiment& ex = w.experiments.at(experiment);
@@ -87,9 +150,9 @@ std::vector<Vector3> synthesize(const WorldFile& w, std::size_t experiment, int 
   as_suite.name = ex.name;
   as_suite.group = ex.group;
   const EffectList effects = group_effects(w.world.effects, w.seed, group_key(as_suite));
-  const Simulator simulator({w.robot.wheelbase_m, w.world.noise}, ex.path, effects);
-  const std::vector<Vector3> errors = simulator.errors(seed, 0, ex.runs, threads);
-  const Vector3 odometry = simulator.odometry_end_pose();
+  Vector3 odometry;
+  const std::vector<Vector3> errors =
+      simulated_errors(w, ex, effects, start_headings(w, experiment), seed, threads, odometry);
   const auto key = random::key_from_seed(seed);
   const Vector3 sigma(w.measurement_noise.xy_m, w.measurement_noise.xy_m,
                       w.measurement_noise.theta_rad);
@@ -100,6 +163,13 @@ std::vector<Vector3> synthesize(const WorldFile& w, std::size_t experiment, int 
       if (sigma(c) > 0) pose(c) += sigma(c) * random::normal_at(key, r, c, random::kTagMeasurement);
     }
     pose.z() = wrap_angle(pose.z());
+    for (int c = 0; c < 2; ++c) {  // theta is wrapped
+      if (const std::string e = limits::check_length(pose(c)); !e.empty()) {
+        throw InputError(w.file, ex.line, "experiments[" + std::to_string(experiment) + "]",
+                         "run " + std::to_string(r + 1) + " ends with " + (c == 0 ? "x " : "y ") + e +
+                             " (the suite would not load): the world's effects are far too large");
+      }
+    }
     measured.push_back(pose);
   }
   return measured;
@@ -120,11 +190,16 @@ SuiteDocument world_suite(const WorldFile& w) {
 
 std::string suite_yaml(const WorldFile& w) { return suite_yaml(world_suite(w)); }
 
-std::string measurements_csv(const std::vector<Vector3>& measured) {
-  std::string text = "run,x,y,theta\n";
+std::string measurements_csv(const std::vector<Vector3>& measured, const std::vector<double>& heading0) {
+  if (!heading0.empty() && heading0.size() != measured.size()) {
+    throw std::invalid_argument("measurements_csv: one heading0 per run");
+  }
+  std::string text = heading0.empty() ? "run,x,y,theta\n" : "run,x,y,theta,heading0\n";
   for (std::size_t r = 0; r < measured.size(); ++r) {
     text += std::to_string(r + 1) + "," + format_number(measured[r].x(), "%.17g") + "," +
-            format_number(measured[r].y(), "%.17g") + "," + format_number(measured[r].z(), "%.17g") + "\n";
+            format_number(measured[r].y(), "%.17g") + "," + format_number(measured[r].z(), "%.17g");
+    if (!heading0.empty()) text += "," + format_number(heading0[r], "%.17g");
+    text += "\n";
   }
   return text;
 }

@@ -14,7 +14,7 @@ namespace {
 /// The diagnose rounds: each adopts at most one candidate; the loop stops when one adopts
 /// nothing or after `rounds`.
 void run_rounds(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
-                DiagnoseProgress* progress, Calibration& out) {
+                DiagnoseProgress* progress, CalibrateResult& out) {
   SuiteModel model = start;
   for (int round = 0; round < options.rounds; ++round) {
     if (progress) progress->round = round + 1;
@@ -35,7 +35,7 @@ bool named_noise_level(const std::vector<std::string>& named) {
 /// model unless a parameter ends at a bound or the NEES mean moves further from 3 than the
 /// loop's model has it (moves_nees_away).
 void joint_fit(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
-               Calibration& out) {
+               CalibrateResult& out) {
   const std::vector<std::string> names = joint_parameters(out.loop_model, named_noise_level(out.named));
   out.model = out.loop_model;
   if (names.empty()) {
@@ -52,9 +52,12 @@ void joint_fit(const Suite& suite, const CalibrateOptions& options, DiagnoseProg
     out.joint_note += "); the loop's model stands";
     return;
   }
+  // Only the NEES means are read: the Gaussian reference (no referee replicates) is enough.
   const double alpha = options.diagnose.alpha;
-  const ModelSummary loop = summarise(compare(suite, out.loop_model, alpha, cache.at(out.loop_model)));
-  const ModelSummary joint = summarise(compare(suite, out.joint.model, alpha, cache.at(out.joint.model)));
+  CalibrationOptions gaussian;
+  gaussian.method = CalibrationMethod::gaussian;
+  const ModelSummary loop = summarise(compare(suite, out.loop_model, alpha, cache.at(out.loop_model), gaussian));
+  const ModelSummary joint = summarise(compare(suite, out.joint.model, alpha, cache.at(out.joint.model), gaussian));
   std::size_t runs = 0;
   for (const SuiteExperiment& ex : suite.experiments) runs += ex.runs.size();
   if (moves_nees_away(loop, joint, runs)) {
@@ -70,8 +73,8 @@ void joint_fit(const Suite& suite, const CalibrateOptions& options, DiagnoseProg
 
 /// The final model's account: compare, residuals, corrected odometry, what the runs cannot
 /// separate and what to record next.
-void account(const Suite& suite, const CalibrateOptions& options, Calibration& out) {
-  const Comparison c = compare(suite, out.model, options.diagnose.alpha);
+void account(const Suite& suite, const CalibrateOptions& options, CalibrateResult& out) {
+  const Comparison c = compare(suite, out.model, options.diagnose.alpha, options.diagnose.calibration);
   out.after = summarise(c);
   out.explained = c.verdict.consistent();
   if (!out.explained) out.residuals = residual_alignment(suite, out.model, residuals(suite, out.model));
@@ -144,9 +147,10 @@ std::vector<std::string> joint_parameters(const SuiteModel& model, bool noise_le
   return names;
 }
 
-HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha) {
+HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha,
+                             const CalibrationOptions& calibration) {
   HoldoutSummary out;
-  out.comparison = compare(holdout, model, alpha);
+  out.comparison = compare(holdout, model, alpha, calibration);
   out.summary = summarise(out.comparison);
   std::vector<std::string> kinds;
   std::map<std::string, std::pair<double, double>> nees;  // kind -> (sum of NEES, runs)
@@ -164,9 +168,9 @@ HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, doub
   return out;
 }
 
-Calibration calibrate(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
+CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
                       const Suite* holdout, DiagnoseProgress* progress) {
-  Calibration out;
+  CalibrateResult out;
   run_rounds(suite, start, options, progress, out);
   if (progress && progress->cancel.load()) throw Cancelled();
   joint_fit(suite, options, progress, out);
@@ -176,7 +180,7 @@ Calibration calibrate(const Suite& suite, const SuiteModel& start, const Calibra
   if (holdout) {
     SuiteModel judged = out.model;
     judged.measurement_noise = holdout->measurement_noise;
-    out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha);
+    out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha, options.diagnose.calibration);
   }
   return out;
 }

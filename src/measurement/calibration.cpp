@@ -126,9 +126,11 @@ Box box_of(const std::vector<Handle>& handles) {
 
 /// Minimises -log L over u in the box from u (updated in place) with NLopt: BOBYQA, or the
 /// subplex method for one coordinate (BOBYQA needs two or more), until a step changes -log L by
-/// less than `ftol_abs`. Returns -log L at u.
+/// less than `ftol_abs`. Returns -log L at u (with no coordinate, NLopt has nothing to do:
+/// -log L there).
 double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int* evaluations,
                 double ftol_abs = 1e-9) {
+  if (u.empty()) return negative_sum(terms(u));
   struct Context {
     const Terms* terms;
     int* evaluations;
@@ -457,6 +459,12 @@ std::pair<double, double> axis_offsets(const Handle& h, double v) {
   return {-step, -2 * step};
 }
 
+/// A re-anchor takes the previous anchor's curvatures only when that anchor's surrogate foretold
+/// the exact log-likelihood at the new one within this: else the model is not quadratic over
+/// the step (a candidate that lands far from its neutral start), and its curvatures are taken
+/// afresh.
+constexpr double kCurvatureTrust = 1.0;
+
 /// The surrogate at the values v (model holds them): the anchor, two points per parameter and
 /// one per pair, all from the cache.
 Surrogate anchor_at(const SuiteModel& model, const std::vector<Handle>& handles,
@@ -543,7 +551,8 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
     // optimum: re-anchoring there would gain no more than the surrogate's error.
     if (gain < kFitTolerance || matched) break;
     apply(model, handles, u.data());
-    s = anchor_at(model, handles, values(u), cache, counter, &s);
+    const bool trusted = std::abs(ll_p - predicted) < kCurvatureTrust;
+    s = anchor_at(model, handles, values(u), cache, counter, trusted ? &s : nullptr);
   }
   out.anchors = std::min(out.anchors, kMaxAnchors);
   out.log_likelihood_after = ll;
@@ -723,6 +732,17 @@ FitResult refit_exactly(const FitResult& fast, const std::vector<std::string>& o
   out = fit_fast(model, all, likelihood, evaluations, cache, std::move(out));
   out.evaluations = fast.evaluations + static_cast<int>(cache.computed() - computed_before);
   return out;
+}
+
+FitResult refit_exactly_from_both(const FitResult& fast, const SuiteModel& start, const std::vector<std::string>& own,
+                                  Likelihood likelihood, std::atomic<std::int64_t>* evaluations, ResidualCache& cache) {
+  FitResult from_fast = refit_exactly(fast, own, likelihood, evaluations, cache);
+  FitResult at_start = fast;  // the same fit, moved to the start: any exact optimum beats it
+  at_start.model = start;
+  at_start.verified = false;
+  at_start.log_likelihood_after = -std::numeric_limits<double>::infinity();
+  FitResult from_start = refit_exactly(at_start, own, likelihood, evaluations, cache);
+  return from_start.log_likelihood_after > from_fast.log_likelihood_after + kFitTolerance ? from_start : from_fast;
 }
 
 namespace {

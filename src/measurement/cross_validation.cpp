@@ -67,6 +67,10 @@ Folds make_folds(const Suite& suite) {
   const bool grouped = std::none_of(suite.experiments.begin(), suite.experiments.end(),
                                     [](const SuiteExperiment& ex) { return ex.group.empty(); });
   if (grouped && groups.distinct.size() >= 2) return folds_of("group", groups);
+  return experiment_folds(suite);
+}
+
+Folds experiment_folds(const Suite& suite) {
   if (suite.experiments.size() < 2) return {};
   const Labels each = labels_of(suite, [](const SuiteExperiment& ex) { return ex.name; });
   return folds_of("experiments", each);
@@ -88,7 +92,9 @@ FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& s
     }
     ResidualCache view(cache, folds.training(f));
     const FitResult first = fit(cache.suite(), start, names, kind, evaluations, path, &view);
-    const FitResult r = refit_exactly(first, own, kind, evaluations, view);
+    // The exact refit moves the candidate's own parameters; the base (no own ones) its whole
+    // fit, so that neither side of a held-out comparison rests on the fast path alone.
+    const FitResult r = refit_exactly(first, own.empty() ? names : own, kind, evaluations, view);
     out.models.push_back(r.model);
     out.own_stderrs.push_back(stderrs_of(r, own));
   }

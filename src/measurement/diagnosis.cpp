@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <boost/math/distributions/chi_squared.hpp>
+#include <boost/math/distributions/normal.hpp>
 #include <cmath>
 #include <limits>
 #include <cstdio>
@@ -14,6 +15,7 @@ namespace odomcov {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 std::size_t run_count(const Suite& suite) {
   std::size_t n = 0;
@@ -29,7 +31,8 @@ std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<Run
 
 /// The fitted parameters of a model's effects (catalogue or custom, from their EffectInfo),
 /// split into systematic ones (moving the mean, fitted on the full likelihood) and random ones
-/// (fitted on the scatter part, which a mean misfit cannot inflate).
+/// (fitted on the scatter part, which a mean misfit cannot inflate): a random effect's, and the
+/// sd of a custom effect's parameter drawn per run.
 struct FittedNames {
   std::vector<std::string> systematic, random;
 };
@@ -38,7 +41,9 @@ FittedNames split_fitted_names(const EffectList& effects) {
   for (const EffectSpec& e : effects) {
     const EffectInfo& info = *info_of(e);
     for (const std::string& n : effect_candidate(info).fitted) {
-      (info.systematic ? out.systematic : out.random).push_back(n);
+      bool spread = false;
+      for (const EffectParameterInfo& p : info.parameters) spread = spread || (p.random_sd && n == info.name + "." + p.name);
+      (info.systematic && !spread ? out.systematic : out.random).push_back(n);
     }
   }
   return out;
@@ -179,7 +184,9 @@ std::vector<CandidateType> group_candidates(const Suite& suite, const EffectList
   for (const EffectSpec& e : model) {
     const EffectInfo* info = info_of(e);
     if (!info->systematic || info->grouped) continue;
-    for (const EffectParameterInfo& p : info->parameters) targets.push_back(e.name + "." + p.name);
+    for (const EffectParameterInfo& p : info->parameters) {
+      if (!p.random_sd) targets.push_back(e.name + "." + p.name);
+    }
   }
   for (const EffectInfo& info : effect_catalogue()) {
     for (const EffectParameterInfo& p : info.parameters) {
@@ -227,6 +234,14 @@ std::vector<CandidateType> round_candidates(const Suite& suite, const EffectList
   return types;
 }
 
+/// Folds with the base's fits on them (its own effects of each kind refitted on each fold's
+/// training runs), computed once per round when first needed.
+struct FoldSet {
+  Folds folds;
+  std::optional<FoldFits> base_full, base_scatter;
+  std::size_t size() const { return folds.size(); }
+};
+
 /// What every candidate fit of a round shares: the suite and the fit settings, the model
 /// before the round (`before`, its comparison) and the base every candidate must improve on,
 /// the model's own effects refitted, with their names by kind and the base's log-likelihoods
@@ -243,8 +258,9 @@ struct Round {
   SuiteModel base;
   double base_full = 0.0, base_scatter = 0.0;
   std::vector<double> base_by_experiment;
-  Folds folds;
-  std::optional<FoldFits> base_folds_full, base_folds_scatter;
+  FoldSet folds;   // the suite's (make_folds)
+  FoldSet within;  // K folds over the experiments (experiment_folds), every kind in training
+  std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
 
   std::atomic<std::int64_t>* counter() const { return progress ? &progress->evaluations : nullptr; }
   /// Throws Cancelled when the caller asked to stop.
@@ -409,13 +425,46 @@ void rank_trials(std::vector<Trial>& trials, double alpha) {
   
 }
 
+/// Simulated replicates per step of match_tails, and its steps at most.
+constexpr std::int64_t kTailReplicates = 49;
+constexpr int kTailSteps = 4;
+
+/// An adopted effect whose tails the Gaussian likelihood cannot see (EffectInfo::rescale_tails,
+/// bumps): its impulse size is set so that the model's own simulated world has the data's
+/// pooled Mardia kurtosis, a simulated method of moments. At a fixed variance the excess
+/// kurtosis grows as the square of the impulse size, so a few fixed-point steps settle it; the
+/// variance, and so every Gaussian likelihood, is unchanged. Returns a note for the report ("" when
+/// nothing was done: no such effect, no experiment of 10 runs, or no excess kurtosis in the
+/// data).
+std::string match_tails(const Suite& suite, SuiteModel& model, const std::string& effect,
+                        ResidualCache& cache, std::uint64_t seed) {
+  EffectSpec* spec = find_spec(model.effects, effect);
+  const TailRescale rescale = spec ? info_of(*spec)->rescale_tails : nullptr;
+  if (!rescale) return "";
+  const std::vector<std::vector<RunResidual>> res = cache.at(model);
+  CalibrationOptions gaussian;
+  gaussian.method = CalibrationMethod::gaussian;
+  const Comparison data = compare(suite, model, kDiagnoseAlpha, res, gaussian);
+  const double excess = data.mardia_b2 - data.mardia_expected;
+  if (!data.kurtosis.valid || !(excess > 0)) return "";
+  for (int step = 0; step < kTailSteps; ++step) {
+    const double model_excess = simulated_kurtosis(suite, model, res, kTailReplicates, seed) - data.mardia_expected;
+    if (!(model_excess > 0)) break;
+    const double factor = std::clamp(std::sqrt(excess / model_excess), 0.1, 10.0);
+    rescale(*spec, factor);
+    if (std::abs(factor - 1.0) < 0.02) break;
+  }
+  return "the impulse size then set so that the model's simulated world has the data's Mardia "
+         "kurtosis, " + format_number(data.mardia_b2, "%.3g") + " (simulated method of moments)";
+}
+
 /// The base's fits on each fold (its own effects of that kind refitted on each fold's
 /// training runs), computed once per round.
-const FoldFits& base_folds(Round& round, Likelihood kind) {
-  std::optional<FoldFits>& slot = kind == Likelihood::full ? round.base_folds_full : round.base_folds_scatter;
+const FoldFits& base_folds(const Round& round, FoldSet& set, Likelihood kind) {
+  std::optional<FoldFits>& slot = kind == Likelihood::full ? set.base_full : set.base_scatter;
   if (!slot) {
     const std::vector<std::string>& names = kind == Likelihood::full ? round.nuisance.systematic : round.nuisance.random;
-    slot = fit_folds(round.cache, round.folds, round.base, names, {}, kind, round.counter(), round.path);
+    slot = fit_folds(round.cache, set.folds, round.base, names, {}, kind, round.counter(), round.path);
   }
   return *slot;
 }
@@ -448,15 +497,15 @@ std::vector<std::vector<RunResidual>> judged(const std::vector<std::vector<RunRe
 
 /// The in-sample gain of the candidate over the base on each fold's runs (what it judges
 /// on): whether a fold has anything for it to predict.
-std::vector<double> fold_signal(const Round& round, const Trial& t, bool on_mean) {
+std::vector<double> fold_signal(const Round& round, const Folds& folds, const Trial& t, bool on_mean) {
   const auto& base = round.cache.at(round.base);
   const auto mine = judged(round.cache.at(t.c.model), base, on_mean);
   const bool scatter = t.kind == Likelihood::scatter;
   const std::vector<double> a = run_log_likelihoods(mine, scatter), b = run_log_likelihoods(base, scatter);
-  std::vector<double> out(round.folds.size(), 0.0);
+  std::vector<double> out(folds.size(), 0.0);
   std::size_t i = 0;
   for (std::size_t e = 0; e < base.size(); ++e) {
-    for (std::size_t r = 0; r < base[e].size(); ++r, ++i) out[static_cast<std::size_t>(round.folds.of_experiment[e])] += a[i] - b[i];
+    for (std::size_t r = 0; r < base[e].size(); ++r, ++i) out[static_cast<std::size_t>(folds.of_experiment[e])] += a[i] - b[i];
   }
   return out;
 }
@@ -466,27 +515,30 @@ std::vector<double> fold_signal(const Round& round, const Trial& t, bool on_mean
 /// covariances), whether the fold can test it (its training runs determine the candidate,
 /// kMaxFoldStderrRatio, and the candidate changes the fold's prediction, kMinFoldSignal), and
 /// in all over the folds that can; NaN when none can.
-void cross_validate(Round& round, Trial& t) {
-  if (round.progress) round.progress->fits_total += static_cast<std::int64_t>(round.folds.size());
-  const FoldFits& base = base_folds(round, t.kind);
-  const FoldFits mine = fit_folds(round.cache, round.folds, t.start, t.fitted, t.type->fitted, t.kind,
+void cross_validate(const Round& round, FoldSet& set, Trial& t) {
+  const Folds& folds = set.folds;
+  if (round.progress) round.progress->fits_total += static_cast<std::int64_t>(folds.size());
+  const FoldFits& base = base_folds(round, set, t.kind);
+  const FoldFits mine = fit_folds(round.cache, folds, t.start, t.fitted, t.type->fitted, t.kind,
                                   round.counter(), round.path);
-  if (round.progress) round.progress->fits_done += static_cast<std::int64_t>(round.folds.size());
+  if (round.progress) round.progress->fits_done += static_cast<std::int64_t>(folds.size());
   const bool on_mean = judged_on_mean(t, t.c.model);
   const std::vector<double> in_sample = own_stderrs(t);
-  const std::vector<double> signal = fold_signal(round, t, on_mean);
+  const std::vector<double> signal = fold_signal(round, folds, t, on_mean);
+  t.c.held_out_by_fold.clear();
   bool any = false;
   double total = 0.0;
-  for (std::size_t f = 0; f < round.folds.size(); ++f) {
-    const std::vector<bool> training = round.folds.training(f);
+  for (std::size_t f = 0; f < folds.size(); ++f) {
+    const std::vector<bool> training = folds.training(f);
     const auto& b = round.cache.full(base.models[f], round.counter());
     const auto& c = round.cache.full(mine.models[f], round.counter());
-    Candidate::FoldGain g{round.folds.names[f],
+    Candidate::FoldGain g{folds.names[f],
                           held_out_log_likelihood(judged(c, b, on_mean), training, t.kind) -
                               held_out_log_likelihood(b, training, t.kind),
                           stderr_ratio(mine.own_stderrs[f], in_sample), signal[f], true};
     g.counted = g.stderr_ratio <= kMaxFoldStderrRatio && std::abs(g.signal) >= kMinFoldSignal;
     g.contradicts = !g.counted && std::abs(g.signal) >= kMinFoldSignal &&
+                    g.stderr_ratio <= kMaxContradictionStderrRatio &&
                     g.gain < -contradiction_bound(g.stderr_ratio, t.c.dof);
     if (g.counted) total += g.gain;
     any = any || g.counted;
@@ -558,15 +610,21 @@ std::vector<std::string> adoption_refit(const Round& round, Trial& t) {
   // the candidate's own fit was already that refit: all of them jointly on its likelihood.)
   bool other_kind = type.complete != nullptr;
   for (const EffectSpec& e : c.model.effects) other_kind = other_kind || info_of(e)->systematic != c.systematic;
-  if (!other_kind) return {};
-  const Refit r = refit(round.suite, c.model, round.progress, round.path, round.cache);
-  c.model = r.model;
+  std::vector<std::string> at_bound;
+  if (other_kind) {
+    Refit r = refit(round.suite, c.model, round.progress, round.path, round.cache);
+    c.model = std::move(r.model);
+    at_bound = std::move(r.at_bound);
+  }
+  const std::string note = match_tails(round.suite, c.model, type.effect, round.cache, round.seed);
+  if (!note.empty()) c.note += (c.note.empty() ? "" : "; ") + note;
+  if (!other_kind && note.empty()) return {};
   if (reported_by_names(type)) {
     for (std::size_t i = 0; i < type.fitted.size(); ++i) c.values[i] = fitted_value(c.model, type.fitted[i]);
   } else {
     c.values = find_spec(c.model.effects, type.effect)->values;  // completed ones stay
   }
-  return r.at_bound;
+  return at_bound;
 }
 
 /// Stops a candidate by `rule` with the words of `decision`.
@@ -613,18 +671,29 @@ bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& bef
   }
   if (round.folds.size() >= 2) {
     round.check_cancel();
-    cross_validate(round, t);
+    const Folds* used = &round.folds.folds;
+    cross_validate(round, round.folds, t);
+    if (!std::isfinite(c.delta_held_out) && round.within.size() >= 2) {
+      // No kind of path can test it (an effect that one kind alone shows): held-out experiments
+      // of each kind instead, with every kind in the training runs.
+      used = &round.within.folds;
+      cross_validate(round, round.within, t);
+    }
     const bool loses_a_fold = std::any_of(c.held_out_by_fold.begin(), c.held_out_by_fold.end(), [](const Candidate::FoldGain& g) {
       return (g.counted && g.gain < -kMaxFoldLoss) || g.contradicts;
     });
-    if (c.delta_held_out <= 0 || loses_a_fold) return stop(c, "mimic", "held-out likelihood", mimic_text(t, round.folds));
+    if (c.delta_held_out <= 0 || loses_a_fold) return stop(c, "mimic", "held-out likelihood", mimic_text(t, *used));
   }
   const std::vector<std::string> bounds = adoption_refit(round, t);
   if (!bounds.empty()) {
     return stop(c, "stopped", "parameter at bound",
                 "not adopted: with every effect refitted, " + joined(bounds) + " ends at the edge of its range");
   }
-  const ModelSummary after = summarise(compare(round.suite, c.model, round.before.alpha, round.cache.at(c.model)));
+  // Only the NEES mean is read: the Gaussian reference (no referee replicates) is enough.
+  CalibrationOptions gaussian;
+  gaussian.method = CalibrationMethod::gaussian;
+  const ModelSummary after =
+      summarise(compare(round.suite, c.model, round.before.alpha, round.cache.at(c.model), gaussian));
   if (moves_nees_away(before, after, runs)) {
     return stop(c, "stopped", "NEES",
                 "not adopted: it moves the NEES mean from " + format_number(before.nees_mean, "%.3g") + " to " +
@@ -640,11 +709,66 @@ bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& bef
   return true;
 }
 
+/// Vuong's statistic for two non-nested fitted candidates on their part of the likelihood
+/// [Vuong89]: z = sum d_i / (sqrt(n) sd(d)), d_i the runs' log-likelihood differences (Welford
+/// for the variance). Near 0 when the likelihood cannot tell the two apart.
+double vuong_z(const Round& round, const Trial& a, const Trial& b) {
+  const bool scatter = a.kind == Likelihood::scatter;
+  const std::vector<double> la = run_log_likelihoods(round.cache.at(a.c.model), scatter);
+  const std::vector<double> lb = run_log_likelihoods(round.cache.at(b.c.model), scatter);
+  double mean = 0.0, m2 = 0.0;
+  for (std::size_t i = 0; i < la.size(); ++i) {
+    const double d = la[i] - lb[i], delta = d - mean;
+    mean += delta / static_cast<double>(i + 1);
+    m2 += delta * (d - mean);
+  }
+  const double n = static_cast<double>(la.size());
+  const double sd = n > 1 ? std::sqrt(m2 / (n - 1)) : 0.0;
+  return sd > 0 ? mean * std::sqrt(n) / sd : (mean == 0.0 ? 0.0 : std::copysign(kInfinity, mean));
+}
+
+bool consistent_model(const Round& round, const SuiteModel& model, const CalibrationOptions& calibration) {
+  return compare(round.suite, model, round.before.alpha, round.cache.at(model), calibration).verdict.consistent();
+}
+
+/// The consistency rule. The likelihood that ranks the candidates is Gaussian and blind to the
+/// shape of the errors (a wheel noise level and bumps add the same variance per metre). When
+/// the adopted candidate leaves the model inconsistent by compare (with its referee, which sees
+/// the shape), each later significant candidate of the same part that the likelihood cannot
+/// tell from it (|Vuong z| below the two-sided alpha point) and that passes every rule is
+/// tried, and the first whose model compare finds consistent is adopted instead. Returns the
+/// adopted trial's index.
+std::size_t prefer_consistent_rival(Round& round, std::vector<Trial>& trials, std::size_t best, double per_candidate,
+                                    const ModelSummary& before, std::size_t runs, const CalibrationOptions& calibration) {
+  if (consistent_model(round, trials[best].c.model, calibration)) return best;
+  const double z_alpha = boost::math::quantile(boost::math::complement(boost::math::normal(), 0.5 * round.before.alpha));
+  for (std::size_t j = best + 1; j < trials.size() && trials[j].c.significant; ++j) {
+    if (trials[j].c.systematic != trials[best].c.systematic) continue;
+    const double z = vuong_z(round, trials[best], trials[j]);
+    if (!(std::abs(z) < z_alpha)) continue;
+    round.check_cancel();
+    if (!judge(round, trials[j], per_candidate, before, runs)) continue;
+    const std::string tie = " the likelihood cannot tell " + trials[best].c.effect + " from " + trials[j].c.effect +
+                            " (Vuong z = " + format_number(z, "%.2f") + ")";
+    if (!consistent_model(round, trials[j].c.model, calibration)) {
+      stop(trials[j].c, "not judged", "", "passes every rule, but" + tie + " and neither leaves the model consistent");
+      continue;
+    }
+    stop(trials[best].c, "stopped", "consistency",
+         "not adopted:" + tie + ", and with it compare finds the model inconsistent, with " + trials[j].c.effect +
+             " consistent (the shape of the errors decides)");
+    trials[j].c.decision += ";" + tie + ", and only with it compare finds the model consistent";
+    return j;
+  }
+  return best;
+}
+
 /// The outcome: the final model (the best candidate's, else the suite's) compared again, its
 /// corrected odometry and, when it still misfits, what the misfit lines up with.
-void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, ResidualCache& cache) {
+void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, ResidualCache& cache,
+                     const CalibrationOptions& calibration) {
   d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, d.alpha,
-                                       cache.at(d.candidates[*d.best].model)))
+                                       cache.at(d.candidates[*d.best].model), calibration))
                    : d.before;
   d.explained = d.after.verdict == "consistent";
   d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
@@ -673,7 +797,10 @@ std::vector<Trial> fit_trials(Round& round, const std::vector<CandidateType>& ty
   for (Trial& t : trials) {
     if (t.fit.verified || !(t.c.significant || !t.type->start.empty())) continue;
     round.check_cancel();
-    t.fit = refit_exactly(t.fit, t.type->fitted, t.kind, round.counter(), round.cache);
+    // A user's candidate (arbitrarily nonlinear) is refitted exactly from its given values too.
+    t.fit = t.type->start.empty()
+                ? refit_exactly(t.fit, t.type->fitted, t.kind, round.counter(), round.cache)
+                : refit_exactly_from_both(t.fit, t.start, t.type->fitted, t.kind, round.counter(), round.cache);
     t.c.exact = true;
     judge_in_sample(round, t, log_runs);
     refitted = true;
@@ -699,6 +826,7 @@ ModelSummary summarise(const Comparison& c) {
   ModelSummary s;
   s.log_likelihood = c.log_likelihood;
   s.verdict = c.verdict.name();
+  s.calibration = c.calibration;
   double runs = 0;
   for (const ExperimentComparison& e : c.experiments) {
     s.nees_mean += e.nees_mean * static_cast<double>(e.n);
@@ -717,14 +845,16 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   d.alpha = options.alpha;
   d.runs = run_count(suite);
   if (options.cross_validate) d.folds = make_folds(suite);
-  const Comparison before = compare(suite, model, options.alpha, cache.at(model));
+  const Comparison before = compare(suite, model, options.alpha, cache.at(model), options.calibration);
   d.before = summarise(before);
   d.kurtosis = before.kurtosis;
   d.heavy_tails = d.kurtosis.valid && d.kurtosis.statistic > 0 && d.kurtosis.p_value < options.alpha;
 
   // The model's own effects, refitted: the reference every candidate must improve on.
   Round round = start_round(suite, model, before, d.heavy_tails, progress, options.path, cache);
-  round.folds = d.folds;
+  round.folds.folds = d.folds;
+  if (options.cross_validate && d.folds.by != "experiments") round.within.folds = experiment_folds(suite);
+  round.seed = options.calibration.seed;
   const std::vector<CandidateType> types =
       round_candidates(suite, model.effects, options.only, options.candidates, options.path == FitPath::fast);
 
@@ -736,20 +866,22 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   for (std::size_t i = 0; i < trials.size() && trials[i].c.significant && !d.best; ++i) {
     if (judge(round, trials[i], per_candidate, d.before, d.runs)) d.best = i;
   }
+  if (d.best) d.best = prefer_consistent_rival(round, trials, *d.best, per_candidate, d.before, d.runs, options.calibration);
   for (Trial& t : trials) d.candidates.push_back(std::move(t.c));
   if (progress) progress->fits_done = progress->fits_total.load();
-  explain_outcome(d, suite, model, cache);
+  explain_outcome(d, suite, model, cache, options.calibration);
   return d;
 }
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
                    const std::vector<std::string>& only, DiagnoseProgress* progress,
-                   const EffectList& candidates, FitPath path) {
+                   const EffectList& candidates, FitPath path, const CalibrationOptions& calibration) {
   DiagnoseOptions options;
   options.alpha = alpha;
   options.only = only;
   options.candidates = candidates;
   options.path = path;
+  options.calibration = calibration;
   return diagnose(suite, model, options, progress);
 }
 
@@ -791,12 +923,14 @@ std::string verdict_text(const Diagnosis& d) {
     if (!a.testable || shown == 3) break;
     if (shown == 0) {
       text += a.p_value < d.alpha
-                  ? "The remaining misfit lines up with (p family-wise over the features):\n"
+                  ? "The remaining misfit lines up with (mean: the experiments' mean errors; scatter: their "
+                    "spread; p family-wise over the features and parts):\n"
                   : "The remaining misfit lines up with no path feature at alpha; the closest "
-                    "(p family-wise over the features):\n";
+                    "(p family-wise over the features and parts):\n";
     }
     if (shown > 0 && !(a.p_value < d.alpha)) break;
-    text += "  " + a.feature + " (p = " + format_number(a.p_value, "%.2g") + "): " + a.description + "\n";
+    text += "  " + a.feature + ", " + a.part + " (p = " + format_number(a.p_value, "%.2g") + "): " +
+            a.description + "\n";
     ++shown;
   }
   if (shown == 0) text += "No path feature varies across the experiments enough to test.\n";

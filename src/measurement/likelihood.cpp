@@ -39,20 +39,43 @@ struct GroupTerms {
 
 GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations,
                        const Robot& robot, const EffectList& effects, const GroupTarget& target,
-                       const Vector3& mid, const Vector3* odometry_end_pose = nullptr) {
+                       const Vector3& mid, const Vector3* odometry_end_pose = nullptr,
+                       double heading0_rad = 0.0) {
   if (!target.present || target.sd == 0.0) return {};
   const double value = effects[target.effect].values[target.parameter];
   const EffectParameterInfo& p = info_of(effects[target.effect])->parameters[target.parameter];
   const double h = std::min({std::sqrt(3.0) * target.sd, 0.5 * (value - p.lower), 0.5 * (p.upper - value)});
   EffectList shifted = effects;
   shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
+  const Vector3 up = predict_mean(pieces, durations, robot, shifted, odometry_end_pose, heading0_rad);
   shifted[target.effect].values[target.parameter] = value - h;
-  const Vector3 down = predict_mean(pieces, durations, robot, shifted, odometry_end_pose);
+  const Vector3 down = predict_mean(pieces, durations, robot, shifted, odometry_end_pose, heading0_rad);
   const double sd2_h2 = target.sd * target.sd / (h * h);  // 1/3 unless h is cut by a bound
   const Vector3 curvature = up + down - 2.0 * mid;        // h^2 f''
   return {0.5 * sd2_h2 * curvature, target.sd * (up - down) / (2.0 * h),
           sd2_h2 * curvature / std::sqrt(2.0)};
+}
+
+/// One planned path's prediction for a run that starts at `heading0_rad`, with its group terms:
+/// the residual of each run of `runs` (all of the experiment's, or one).
+void predict_path_runs(const SuiteExperiment& ex, const SuiteModel& model, const GroupTarget& target,
+                       const Matrix3& meas, int group, double heading0_rad, std::size_t first,
+                       std::size_t count, std::vector<RunResidual>& out) {
+  const double B = model.robot.wheelbase_m;
+  std::vector<double> durations;
+  const std::vector<ArcSegment> pieces = path_model_pieces(ex.path, B, model.effects, &durations);
+  const Prediction p =
+      predict_with_order(pieces, durations, model.robot, model.effects, model.order, heading0_rad);
+  const GroupTerms g = group_terms(
+      pieces, durations, model.robot, model.effects, target,
+      target.present ? predict_mean(pieces, durations, model.robot, model.effects, nullptr, heading0_rad)
+                     : Vector3::Zero(),
+      nullptr, heading0_rad);
+  const Vector3 odometry = sampled_end_pose(ex.path, B);
+  for (std::size_t i = first; i < first + count; ++i) {
+    out[i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean + g.shift, p.cov + meas,
+              g.column, group, g.column2, p.noise_mean};
+  }
 }
 
 }  // namespace
@@ -62,7 +85,11 @@ std::string second_order_problem(const Suite& suite, int order) {
   const double B = suite.robot.wheelbase_m;
   for (const SuiteExperiment& ex : suite.experiments) {
     std::size_t most = 0;
-    if (!ex.logged) most = second_order_piece_count(model_pieces(ex.path, B), B);
+    if (!ex.logged) {
+      std::vector<double> durations;
+      const std::vector<ArcSegment> pieces = path_model_pieces(ex.path, B, suite.model_effects, &durations);
+      most = second_order_piece_count(pieces, durations, B, suite.model_effects);
+    }
     for (const SuiteRun& run : ex.logged ? ex.runs : std::vector<SuiteRun>{}) {
       most = std::max(most, second_order_piece_count(coarsen_pieces(run.pieces, B), B));
     }
@@ -76,14 +103,17 @@ std::string second_order_problem(const Suite& suite, int order) {
 }
 
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model) {
-  const double B = model.robot.wheelbase_m;
   const Matrix3 meas = model.measurement_noise.covariance();
   const GroupTarget target = group_target(model.effects);
+  // With an effect that uses the absolute heading every run is predicted from its own start
+  // heading; else one prediction serves all the runs of a planned path (the fast common case).
+  const bool per_run = effect_needs(model.effects).start_heading;
   std::map<std::string, int> groups;
   std::vector<std::vector<RunResidual>> out(suite.experiments.size());
   // Every unit of work: a planned-path experiment (one prediction serves all its runs) or one
-  // logged run. They run in parallel over the whole suite (most logged experiments are single
-  // runs, so a loop per experiment would leave cores idle).
+  // run (logged, or of a path whose prediction depends on the run's start heading). They run in
+  // parallel over the whole suite (most logged experiments are single runs, so a loop per
+  // experiment would leave cores idle).
   // Group indices are assigned serially first (in experiment order), so they do not depend on
   // the thread schedule.
   std::vector<std::pair<std::size_t, std::size_t>> work;
@@ -92,7 +122,7 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     const SuiteExperiment& ex = suite.experiments[e];
     group_of[e] = groups.emplace(group_key(ex), static_cast<int>(groups.size())).first->second;
     out[e].resize(ex.runs.size());
-    if (!ex.logged) {
+    if (!ex.logged && !per_run) {
       work.emplace_back(e, 0);
       continue;
     }
@@ -109,28 +139,18 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     const auto [e, r] = work[w];
     const SuiteExperiment& ex = suite.experiments[e];
     const int group = group_of[e];
-    if (ex.logged) {
-      const SuiteRun& run = ex.runs[r];
-      const Prediction p =
-          predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order);
-      const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects,
-                                       target, p.mean, &p.odometry_end_pose);
-      out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
-                   p.cov + meas, g.column, group, g.column2};
+    if (!ex.logged) {
+      const std::size_t count = per_run ? 1 : ex.runs.size();
+      predict_path_runs(ex, model, target, meas, group, per_run ? ex.runs[r].heading0_rad : 0.0, r, count, out[e]);
       return;
     }
-    std::vector<double> durations;
-    const std::vector<ArcSegment> pieces = model_pieces(ex.path, B, &durations);
-    const Prediction p = predict_with_order(pieces, durations, model.robot, model.effects, model.order);
-    const GroupTerms g =
-        group_terms(pieces, durations, model.robot, model.effects, target,
-                    target.present ? predict_mean(pieces, durations, model.robot, model.effects)
-                                   : Vector3::Zero());
-    const Vector3 odometry = sampled_end_pose(ex.path, B);
-    for (std::size_t i = 0; i < ex.runs.size(); ++i) {
-      out[e][i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean + g.shift,
-                   p.cov + meas, g.column, group, g.column2};
-    }
+    const SuiteRun& run = ex.runs[r];
+    const Prediction p = predict_with_order(run.pieces, run.durations_s, model.robot, model.effects,
+                                            model.order, run.heading0_rad);
+    const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects, target,
+                                     p.mean, &p.odometry_end_pose, run.heading0_rad);
+    out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
+                 p.cov + meas, g.column, group, g.column2, p.noise_mean};
   }, tbb::simple_partitioner());
   return out;
 }

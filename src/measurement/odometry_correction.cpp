@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 
+#include "closed_form/arc_functions.hpp"
 #include "effects/effect.hpp"
 
 namespace odomcov {
@@ -58,7 +59,9 @@ std::vector<double> piece_durations(const SuiteExperiment& ex, const SuiteRun& r
 /// heading change).
 Vector3 true_end_pose(const effects::ResolvedPath& path) {
   Vector3 pose = Vector3::Zero();
-  for (const effects::ResolvedPiece& p : path.pieces) pose = compose(pose, arc_displacement(p.center_m, p.angle_rad));
+  for (const effects::ResolvedPiece& p : path.pieces) {
+    pose = compose(pose, detail::arc_displacement(p.center_m, p.lateral_m, detail::ArcStep(p.angle_rad)));
+  }
   return pose;
 }
 
@@ -84,7 +87,8 @@ std::optional<OdometryCorrection> odometry_correction(const Suite& suite, const 
     Eigen::Vector2d cg_before = Eigen::Vector2d::Zero(), cg_after = Eigen::Vector2d::Zero();
     for (const SuiteRun& run : ex.runs) {
       const std::vector<ArcSegment> pieces = encoder_pieces(ex, run);
-      const effects::ResolvedPath path = effects::resolve(pieces, piece_durations(ex, run), model.robot, model.effects);
+      const effects::ResolvedPath path =
+          effects::resolve(pieces, piece_durations(ex, run), model.robot, model.effects, run.heading0_rad);
       Vector3 nominal = Vector3::Zero();
       for (const ArcSegment& p : pieces) nominal = drive(nominal, p, B);
       for (const effects::ResolvedPiece& p : path.pieces) {

@@ -4,6 +4,7 @@
 #include <limits>
 #include <string>
 
+#include "odomcov/base/error.hpp"
 #include "odomcov/closed_form/limits.hpp"
 #include "odomcov/engine/propagation.hpp"
 #include "odomcov/engine/second_order.hpp"
@@ -13,26 +14,40 @@ namespace {
 
 /// The order-2 theory and its tests: mean chi^2 (valid for any distribution by the CLT) and
 /// Browne's ADF covariance test, which takes the sample's own fourth moments.
+/// Order 2 not computed (its cost is quadratic in its pieces): untestable, never "consistent".
+OrderResult order2_not_computed(const std::string& why) {
+  OrderResult r;
+  r.order = 2;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  r.theory_mean = Vector3::Constant(nan);
+  r.theory_cov = Matrix3::Constant(nan);
+  r.theory_source = "order 2: not computed";
+  r.nees_mean = nan;
+  r.mean_test.valid = r.cov_test.valid = r.cov_lrt.valid = false;
+  r.verdict = Verdict::untestable(why);
+  return r;
+}
+
 OrderResult order2_result(const Config& config, const SampleMoments& sim, double alpha) {
   OrderResult r;
   r.order = 2;
   std::vector<double> durations;
   const std::vector<ArcSegment> pieces =
-      model_pieces(config.path, config.robot.wheelbase_m, &durations);
-  const std::size_t count = second_order_piece_count(pieces, config.robot.wheelbase_m);
-  if (count > kMaxSecondOrderPieces) {  // quadratic cost: not computed, never "consistent"
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    r.theory_mean = Vector3::Constant(nan);
-    r.theory_cov = Matrix3::Constant(nan);
-    r.theory_source = "order 2: not computed";
-    r.nees_mean = nan;
-    r.mean_test.valid = r.cov_test.valid = r.cov_lrt.valid = false;
-    r.verdict = Verdict::untestable("order 2 needs " + std::to_string(count) +
-                                    " quadrature pieces on this path, above the limit " +
-                                    std::to_string(kMaxSecondOrderPieces) + " (docs/bad-input.md)");
-    return r;
+      path_model_pieces(config.path, config.robot.wheelbase_m, config.model_effects, &durations);
+  const std::size_t count =
+      second_order_piece_count(pieces, durations, config.robot.wheelbase_m, config.model_effects);
+  if (count > kMaxSecondOrderPieces) {
+    return order2_not_computed("order 2 needs " + std::to_string(count) +
+                               " quadrature pieces on this path, above the limit " +
+                               std::to_string(kMaxSecondOrderPieces) + " (docs/bad-input.md)");
   }
-  const Prediction p = predict_second_order(pieces, durations, config.robot, config.model_effects);
+  Prediction p;
+  try {
+    p = predict_second_order(pieces, durations, config.robot, config.model_effects);
+  } catch (const InputError& e) {  // the effects cut the pieces beyond the limit
+    if (e.key() != "order 2") throw;
+    return order2_not_computed("order 2 needs " + e.message() + " (docs/bad-input.md)");
+  }
   r.theory_mean = p.mean + p.noise_mean;
   r.theory_cov = p.cov;
   r.theory_source = "order 2: exact Gaussian-heading moments";
@@ -66,7 +81,7 @@ Validation validate(const Config& config, double alpha, int threads, Progress* p
   } else {
     std::vector<double> durations;
     const std::vector<ArcSegment> pieces =
-        model_pieces(config.path, config.robot.wheelbase_m, &durations);
+        path_model_pieces(config.path, config.robot.wheelbase_m, config.model_effects, &durations);
     const Prediction p = predict(pieces, durations, config.robot, config.model_effects);
     v.theory_mean = p.mean;
     v.theory_cov = p.cov;

@@ -1,6 +1,7 @@
 // Fuzz target, round trip: a world file is synthesised (at most 8 runs per experiment, small
-// paths only) and what synth writes (suite.yaml and the CSVs) must load back as a suite and
-// compare. A world that loads but whose suite does not is a bug, reported as a crash.
+// paths only) and what synth writes (suite.yaml and the CSVs, with each run's start heading)
+// must load back as a suite and compare. A world that synth accepts but whose suite does not
+// load is a bug, reported as a crash.
 #include <algorithm>
 #include <cstdint>
 
@@ -24,16 +25,20 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     ex.runs = std::min<std::int64_t>(ex.runs, 8);
   }
   const auto out = fuzz::scratch_dir("out");
-  for (std::size_t i = 0; i < world.experiments.size(); ++i) {
-    fuzz::write_text(out / (world.experiments[i].name + ".csv"),
-                     measurements_csv(synthesize(world, i, 1)));
+  try {
+    for (std::size_t i = 0; i < world.experiments.size(); ++i) {
+      fuzz::write_text(out / (world.experiments[i].name + ".csv"),
+                       measurements_csv(synthesize(world, i, 1), start_headings(world, i)));
+    }
+  } catch (const InputError&) {
+    return 0;  // synth refuses the world (an expression not finite, runs beyond the limits)
   }
   fuzz::write_text(out / "suite.yaml", suite_yaml(world));
   try {
     const Suite suite = load_suite((out / "suite.yaml").string());
     // As the CLI: order 2 (the default) beyond its piece limit is refused, not computed.
     if (second_order_problem(suite, suite_model(suite).order).empty()) {
-      compare(suite, suite_model(suite), 0.01);
+      fuzz::compare_both_ways(suite);
     }
   } catch (const InputError& e) {
     fuzz::invariant_failed(std::string("synth wrote a suite that does not load: ") + e.what());

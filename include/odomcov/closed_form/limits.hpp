@@ -68,6 +68,8 @@ std::string check_wheel_noise(const WheelNoise& noise);
 std::string check_wheelbase(double wheelbase_m);
 /// A length (|value| <= kMaxLength_m).
 std::string check_length(double value_m);
+/// An angle, e.g. a run's start heading (|value| <= kMaxTurn_rad).
+std::string check_angle(double value_rad);
 /// Model pieces a path needs at this wheelbase (as model_pieces cuts it), without cutting it.
 double model_piece_count(const Path& path, double wheelbase_m);
 

@@ -98,5 +98,11 @@ inline constexpr double kPieceMaxTravel = 0.25;  // m
 /// `durations_s`, when given, receives each piece's duration.
 std::vector<ArcSegment> model_pieces(const Path& path, double wheelbase_m,
                                      std::vector<double>* durations_s = nullptr);
+/// The pieces of the sampled path: each run of equal samples of sample_schedule becomes its
+/// first sample alone, then the rest cut as model_pieces cuts an interval. A quantity that
+/// changes only where the increment changes (the acceleration along the path, from one sample
+/// to the next) is then constant on every piece, as it is on every sample.
+std::vector<ArcSegment> sample_model_pieces(const Path& path, double wheelbase_m,
+                                            std::vector<double>* durations_s = nullptr);
 
 }  // namespace odomcov

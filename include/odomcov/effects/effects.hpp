@@ -7,6 +7,7 @@
 #include <memory>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "odomcov/base/error.hpp"
@@ -48,6 +49,9 @@ struct EffectParameterInfo {
   /// model does not have its effect yet (wheelbase_error.Eb, wheel_diameter_ratio.Ed: tyre
   /// pressure, load): diagnose then tries group_variation of it.
   bool varies_between_groups = false;
+  /// True for the std-dev of a parameter a custom effect draws per run (`random: {p: sd}`, the
+  /// fit parameter <name>.sd_p): a spread, fitted on the scatter and never varied by groups.
+  bool random_sd = false;
 };
 
 /// How a fit moves one parameter: the coordinate u its optimiser sees (v = f(u)), the box and
@@ -82,6 +86,12 @@ struct ObservedExperiment {
 using CandidateCompletion = std::string (*)(const std::vector<ObservedExperiment>& data,
                                             EffectSpec& spec, std::vector<double>& stderrs);
 
+/// An effect whose tails the Gaussian likelihood cannot see (bumps): makes its impulses `factor`
+/// times larger at the same variance (bumps: sigma x factor, rate / factor^2), so the fourth
+/// cumulant it adds, and the excess kurtosis of the errors, grow by factor^2. diagnose uses it
+/// to give an adopted effect the data's kurtosis in the model's simulated world.
+using TailRescale = void (*)(EffectSpec& spec, double factor);
+
 struct EffectInfo {
   std::string name;
   std::vector<EffectParameterInfo> parameters;
@@ -107,39 +117,78 @@ struct EffectInfo {
   /// The candidate a Gaussian likelihood cannot tell this one apart from ("" for none): when both
   /// are significant, heavy tails put the one with heavy_tails first, Gaussian tails the other.
   std::string confused_with{};
+  /// May be nullptr; see TailRescale.
+  TailRescale rescale_tails = nullptr;
+  /// How many standard-normal per-run constants the model carries for the effect
+  /// (per_run_radius: 2; a custom effect: one per random parameter); a model holds at most
+  /// kMaxRunConstants (4) in all.
+  int run_constants = 0;
+  /// True when the effect depends on the run's absolute heading (the `heading` variable): each
+  /// run is then predicted with its own start heading (SuiteRun::heading0_rad).
+  bool uses_start_heading = false;
+  /// True when the effect depends on the acceleration along the path (the `a` variable), which on
+  /// a planned path changes only at the first sample of each stretch of equal samples: the model
+  /// then sets those samples apart as pieces of their own (path_model_pieces).
+  bool uses_acceleration = false;
 };
 
-/// A custom effect, defined in YAML: its own parameters and up to four expressions over the
-/// per-sample variables (custom_effect_variables) and the parameters, evaluated by muparser.
-/// An empty expression means 1. true travel of each wheel = scale x scale_<wheel> x encoder,
-/// true wheelbase = wheelbase_factor x nominal. Build it with define_custom_effect.
+/// What predictions with a list of effects need beyond the encoder pieces and their durations.
+struct EffectNeeds {
+  bool start_heading = false;  // each run's start heading (an effect uses `heading`)
+  bool sample_pieces = false;  // planned paths resolved where the speed changes (`a`)
+};
+EffectNeeds effect_needs(const EffectList& list);
+
+/// A custom effect, defined in YAML (docs/effects.md, "Custom effects"): its own parameters
+/// and up to six expressions over the per-sample variables (custom_effect_variables) and the
+/// parameters, evaluated by muparser. true travel of each wheel = scale x scale_<wheel> x
+/// encoder, true wheelbase = wheelbase_factor x nominal (an empty expression means 1), a lateral
+/// slip of the centre of `lateral` metres to the left per metre of mean wheel travel (empty: 0),
+/// and both wheels' white noise variance times `noise` (empty: 1). The parameters named in
+/// `random` are drawn once per run from N(value, sd^2). Build it with define_custom_effect.
 struct CustomEffect {
   /// One expression and where it was written (file, line, dotted key) for runtime errors.
   struct Expression {
-    std::string text;  // "" = 1
+    std::string text;  // "" = the key's neutral value (1, or 0 for lateral)
     std::string file;
     int line = 0;
     std::string key;
   };
   std::string name;
   std::vector<std::string> parameters;
+  /// The parameters drawn once per run (`random: {p: sd}`), in the order written; each one's sd
+  /// is a value of the spec after the parameters' own (fit parameter <name>.sd_<p>).
+  std::vector<std::string> random;
   std::string file;  // where the definition was written, for messages
   int line = 0;
   std::string key;
-  Expression scale, scale_left, scale_right, wheelbase_factor;
-  /// The description fit and diagnose use: parameters unbounded and signed (identity fit
-  /// transform), neutral at the starting value; systematic.
+  Expression scale, scale_left, scale_right, wheelbase_factor, lateral, noise;
+  /// The description fit and diagnose use: the parameters unbounded and signed (identity fit
+  /// transform), neutral at the starting value, then each random parameter's sd_<p> (>= 0,
+  /// square-root fit coordinate); systematic unless the effect only shapes the noise.
   EffectInfo info;
   /// What the expressions depend on, set by define_custom_effect: 0 nothing, 1 the increment
-  /// (v, kappa, r, dir, turn), 2 the history (s, t).
+  /// (v, kappa, r, dir, turn, omega), 2 the history (s, t, a, theta, heading).
   int dependence = 0;
+  /// Set by define_custom_effect: an expression uses s, t, theta or heading (smooth along a
+  /// piece: the model cuts pieces finer where they are not linear along it).
+  bool smooth_history = false;
 
+  /// The effect's expressions with their YAML keys, in the order they are written.
+  std::vector<std::pair<const char*, const Expression*>> expressions() const;
+  std::vector<std::pair<const char*, Expression*>> expressions();
   bool operator==(const CustomEffect& other) const;
 };
 
 /// The per-sample variables a custom effect's expressions may use, in the SPEC's order:
-/// v, kappa, r, dir, turn, s, t.
+/// v, kappa, r, dir, turn, s, t, a, omega, theta, heading. A parameter may take the name of one
+/// of the last four (added after custom effects were first released: a definition with a
+/// parameter `a` keeps its meaning), which then hides that variable in its effect.
 const std::vector<std::string>& custom_effect_variables();
+
+/// The most parameters a custom effect may draw per run (`random:`): each is a per-run constant
+/// of the model (kMaxRunConstants in all).
+inline constexpr std::size_t kMaxRandomParameters = 4;
 
 /// "" when `text` compiles with the variables and these parameter names, else muparser's
 /// message (e.g. "Unexpected token \"x\" found at position 4.").
@@ -150,9 +199,10 @@ std::string check_custom_expression(const std::string& text,
 /// digits and '_', not starting with a digit, not a variable's name), else why not.
 std::string check_custom_name(const std::string& name);
 
-/// Builds a custom effect definition and its spec with the starting values. Throws InputError
-/// (file, line and key of the offending expression) for a bad expression or name, or a name
-/// that clashes with a catalogue effect.
+/// Builds a custom effect definition and its spec with the starting values: the parameters',
+/// then each random parameter's sd. Throws InputError (file, line and key of the offending
+/// expression) for a bad expression or name, a name that clashes with a catalogue effect, a
+/// random parameter that is not a parameter, or an sd that is negative or not finite.
 EffectSpec define_custom_effect(CustomEffect definition, const std::vector<double>& start);
 
 /// Every effect of the catalogue, in the order of docs/formats.md.
@@ -206,11 +256,23 @@ GroupTarget group_target(const EffectList& list);
 /// count. Throws EffectError when the draw leaves the parameter's range (sd far too large).
 EffectList group_effects(const EffectList& list, std::uint64_t seed, const std::string& group);
 
+/// The most standard-normal per-run constants one model may carry (EffectInfo::run_constants).
+inline constexpr int kMaxRunConstants = 4;
+/// "" when the list's effects carry at most kMaxRunConstants per-run constants, else what is wrong.
+std::string check_run_constants(const EffectList& list);
+
 /// Throws EffectError unless every spec passes check_effect, no name repeats, a group_variation
 /// names a systematic parameter of the list (check_group_target) and the list has
 /// at most kMaxEffects entries. Every entry point that builds effects (Simulator, predict,
 /// resolve) calls it.
 void check_effects(const EffectList& list);
+
+/// "" when every effect of the list adds only Gaussian noise or deterministic changes on the
+/// world side, else the first that does not and why ("bumps: Poisson impulses (heavy tails)").
+/// An effect at a size where it does nothing (bumps at rate 0) counts as Gaussian. compare
+/// takes its Gaussian tests as exact only for such a list (docs/diagnose.md, "How compare
+/// decides"). Throws EffectError for an invalid list.
+std::string non_gaussian_effect(const EffectList& list);
 
 /// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}" or
 /// "- group_variation: {parameter: wheelbase_error.Eb, sd: 0.002}", or for a custom effect its

@@ -73,8 +73,12 @@ struct Prediction {
 ///    reversals, time); `durations_s` gives each piece's duration (the overload without it
 ///    leaves time and speed unknown, NaN).
 ///  * Measurement hooks (reference_offset) map the mean end pose and the covariance last.
+///  * A lateral slip (effects' Systematic::lateral) adds to each piece's displacement and turns
+///    with the heading error as the travel does (arc kernels with a lateral slip).
+///  * `heading0_rad`: the run's start heading in the reference's frame, which effects that use
+///    the absolute heading see (custom effects' `heading`; 0 where unknown).
 Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                   const Robot& robot, const EffectList& effects);
+                   const Robot& robot, const EffectList& effects, double heading0_rad = 0.0);
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effects);
 
@@ -85,7 +89,7 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
 /// integrating it again.
 Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                      const Robot& robot, const EffectList& effects,
-                     const Vector3* odometry_end_pose = nullptr);
+                     const Vector3* odometry_end_pose = nullptr, double heading0_rad = 0.0);
 
 /// The engine's prediction after every piece, for covariance along a trajectory (an encoder
 /// log, one piece per sample): element 0 is the start (all zero), element i the state after
@@ -93,7 +97,16 @@ Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<do
 /// piece's duration, for effects that depend on speed or time; empty when unknown).
 std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,
                                            const std::vector<double>& durations_s,
-                                           const Robot& robot, const EffectList& effects);
+                                           const Robot& robot, const EffectList& effects,
+                                           double heading0_rad = 0.0);
+
+/// The pieces the model resolves a planned path into for a list of effects: model_pieces, or,
+/// when an effect uses the acceleration (effect_needs: `a`, which on a sampled path changes
+/// only at the first sample of each stretch of equal samples), sample_model_pieces, on which the
+/// acceleration is constant piece by piece as it is sample by sample in the simulator.
+/// `durations_s`, when given, receives each piece's duration.
+std::vector<ArcSegment> path_model_pieces(const Path& path, double wheelbase_m, const EffectList& effects,
+                                          std::vector<double>* durations_s = nullptr);
 
 
 }  // namespace odomcov

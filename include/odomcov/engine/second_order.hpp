@@ -10,8 +10,9 @@
 // along the path, with no truncation in the noise. The integrals are done by Gauss-Legendre
 // quadrature per piece (<= 0.25 rad, <= 1 m; equal consecutive model pieces are merged first).
 //
-// Exact for the white wheel noise, wheel noise correlation, turn slip, per-run radius and every
-// systematic effect; bumps enter through their Gaussian equivalent (an approximation: the
+// Exact for the white wheel noise, wheel noise correlation, turn slip, per-run radius, custom
+// effects' random parameters (to first order in their sd, as the first-order engine carries
+// them), lateral slips and every systematic effect; bumps enter through their Gaussian equivalent (an approximation: the
 // model's mean and covariance stay exact to second order in the bump size, its higher moments
 // do not). Not modelled: the wrap of theta to (-pi, pi] (the model's theta is unwrapped), and the
 // O(1/f) difference between the sampled odometry and the continuous noise of the model.
@@ -37,14 +38,22 @@ inline constexpr int kSecondOrderNodes = 4;
 /// enters as it does in the first-order engine.
 Prediction predict_second_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
                                 const EffectList& effects);
-/// The same with each piece's duration, which motion-dependent effects use (speed, time).
+/// The same with each piece's duration, which motion-dependent effects use (speed, time), and
+/// the run's start heading in the reference's frame (effects' `heading`).
 Prediction predict_second_order(const std::vector<ArcSegment>& pieces,
                                 const std::vector<double>& durations_s, const Robot& robot,
-                                const EffectList& effects);
+                                const EffectList& effects, double heading0_rad = 0.0);
 
 /// The number of quadrature pieces predict_second_order cuts `pieces` into (before any
-/// effect's split); above kMaxSecondOrderPieces (limits.hpp) it throws std::length_error.
+/// effect's split) for effects that do not use the acceleration; above kMaxSecondOrderPieces
+/// (limits.hpp) predict_second_order throws InputError (key "order 2"), as it does when the
+/// effects cut the pieces beyond it (a smooth history term, Effect::refines) while the model
+/// has per-run constants (the cost is quadratic only then; without, beyond kMaxModelPieces).
 std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, double wheelbase_m);
+/// The same for these effects and durations (pieces whose speed changes are not merged when an
+/// effect uses the acceleration).
+std::size_t second_order_piece_count(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                                     double wheelbase_m, const EffectList& effects);
 
 /// Merges consecutive pieces (e.g. the per-sample pieces of a logged run) into pieces that turn
 /// at most kPieceMaxAngle and travel at most kPieceMaxTravel, never merging across a reversal
@@ -67,6 +76,6 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot
 /// model_pieces), which motion-dependent effects use.
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
-                              const EffectList& effects, int order);
+                              const EffectList& effects, int order, double heading0_rad = 0.0);
 
 }  // namespace odomcov

@@ -11,6 +11,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "odomcov/effects/effects.hpp"
@@ -30,13 +31,19 @@ class Simulator {
  public:
   /// `robot`: nominal wheelbase (the odometry's) with the world's wheel noise constants;
   /// `effects`: the world's effects. Systematic effects are folded into the path; stochastic
-  /// ones (noise correlation, slip, per-run radius, bumps) run in a general scalar kernel.
-  Simulator(const Robot& robot, const Path& path, const EffectList& effects = {});
+  /// ones (noise correlation, slip, per-run radius, bumps) run in the SIMD lanes too (the
+  /// general kernel), each drawing from its own counter streams; a custom effect's random
+  /// parameters rebuild the legs per run (the scalar reference kernel, run by run).
+  /// `heading0_rad`: the run's start heading in the reference's frame (effects' `heading`;
+  /// every run of this simulator starts there).
+  Simulator(const Robot& robot, const Path& path, const EffectList& effects = {},
+            double heading0_rad = 0.0);
   /// A logged run (SuiteRun::pieces): one sample per encoder piece, of the piece's duration
   /// (`durations_s` empty: unknown, so speed- and time-dependent effects see NaN), so the
   /// simulated run steps exactly as the model's prediction of that run resolves it.
   Simulator(const Robot& robot, const std::vector<ArcSegment>& pieces,
-            const std::vector<double>& durations_s, const EffectList& effects = {});
+            const std::vector<double>& durations_s, const EffectList& effects = {},
+            double heading0_rad = 0.0);
   ~Simulator();
   Simulator(Simulator&&) noexcept;
   Simulator& operator=(Simulator&&) noexcept;
@@ -50,16 +57,23 @@ class Simulator {
   std::vector<Vector3> errors(std::uint64_t seed, std::int64_t first, std::int64_t count,
                               int threads = 0) const;
 
-  /// The error of one run by the scalar reference kernel, which the vectorised kernel must
-  /// match bit for bit (with stochastic effects, the general kernel is the only one).
+  /// The error of one run by the scalar reference kernel, which the SIMD kernel of every
+  /// instruction set must match bit for bit (with effects too).
   Vector3 reference_error(std::uint64_t seed, std::int64_t run) const;
 
   /// Odometry (noise-free) end pose, integrated sample by sample like the true pose.
   Vector3 odometry_end_pose() const;
   std::int64_t samples_per_run() const;
 
-  /// Which instruction set the vectorised kernel dispatched to on this machine.
+  /// The instruction set the SIMD kernel runs on (Highway's target name: "AVX3" is AVX-512,
+  /// "AVX2", "SSE4", "NEON", "EMU128" the portable one). Every target gives the same bits.
   static const char* kernel_isa();
+  /// The instruction sets this build has a kernel for and this CPU runs, best first.
+  static std::vector<std::string> kernel_targets();
+  /// Makes every simulation run the kernel of `target` (one of kernel_targets(); "" = the best,
+  /// the default; the environment variable ODOMCOV_SIMD names one at start-up). For benchmarks
+  /// and tests; throws std::invalid_argument for a target not in kernel_targets().
+  static void select_kernel(const std::string& target);
 
  private:
   struct Impl;

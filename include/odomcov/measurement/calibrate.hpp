@@ -67,7 +67,7 @@ inline constexpr double kUnusedVariance = 1e6;
 /// diff_drive_controller's parameters from a calibrated model and its training runs.
 DiffDriveParameters diff_drive_parameters(const Suite& suite, const SuiteModel& model);
 
-struct Calibration {
+struct CalibrateResult {
   std::vector<Diagnosis> rounds;
   std::vector<std::string> named;  // the adopted candidates, in order
   SuiteModel loop_model;           // the model after the last adoption (everything refitted)
@@ -97,12 +97,13 @@ struct Calibration {
 /// of the final model; its training domain; and, given `holdout` runs, the final model against
 /// them (with the holdout suite's measurement noise). Throws Cancelled when `progress->cancel`
 /// is set.
-Calibration calibrate(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
+CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
                       const Suite* holdout = nullptr, DiagnoseProgress* progress = nullptr);
 
 /// The model against held-out runs: compare, the NEES per kind, and the experiments outside
 /// the model's training domain.
-HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha);
+HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha,
+                             const CalibrationOptions& calibration = {});
 
 /// The parameters calibrate's joint fit refits in a model: each effect's fitted ones
 /// (EffectInfo; group_variation's sd), and k_left, k_right when `noise_level`.

@@ -155,6 +155,12 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
 FitResult refit_exactly(const FitResult& fast, const std::vector<std::string>& own,
                         Likelihood likelihood, std::atomic<std::int64_t>* evaluations,
                         ResidualCache& cache);
+/// The same, also from `start` (a user's candidate at its given values): a strongly nonlinear
+/// expression (a time constant) can leave the fast path in another basin of the exact
+/// likelihood, from whose optimum no local exact step escapes. `own` is refitted exactly from
+/// both points, and the better optimum stands (then the fast path over every name, as above).
+FitResult refit_exactly_from_both(const FitResult& fast, const SuiteModel& start, const std::vector<std::string>& own,
+                                  Likelihood likelihood, std::atomic<std::int64_t>* evaluations, ResidualCache& cache);
 
 struct UmbmarkResult {
   double side_m = 0.0;

@@ -40,6 +40,10 @@ struct Folds {
 /// a single experiment. More kinds or groups than kMaxFolds share folds in order of first
 /// appearance (round robin).
 Folds make_folds(const Suite& suite);
+/// K = min(kMaxFolds, experiments) folds over the experiments, experiment i in fold i mod K (none
+/// for a single experiment): make_folds' last resort, and diagnose's fallback for a candidate
+/// that no kind of path can test (each fold then keeps every kind in its training runs).
+Folds experiment_folds(const Suite& suite);
 
 /// A fit repeated on each fold's complement.
 struct FoldFits {
@@ -51,7 +55,8 @@ struct FoldFits {
 
 /// For each fold f: fits `names` from `start` on the runs of every other fold, on a view of
 /// `cache` (the round's fit path; on the fast path then refit_exactly over `own`, the nonlinear
-/// parameters of a candidate). No names: `start` for every fold. `cache` belongs to the whole
+/// parameters of a candidate, or over every name when `own` is empty: the base). No names:
+/// `start` for every fold. `cache` belongs to the whole
 /// suite, so each fold's model is propagated once for all its runs, the held-out ones
 /// included. `path`: exact fits each fold on the exact path (diagnose --exact).
 FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& start,

@@ -77,6 +77,11 @@ inline constexpr double kMaxFoldLoss = 2.0;
 /// r^2 chi^2_k / 2 in log-likelihood; a loss beyond kMaxFoldLoss + r^2 q / 2, q the chi^2_k
 /// quantile at 1 - kContradictionAlpha, is more than that uncertainty explains.
 inline constexpr double kContradictionAlpha = 0.01;
+/// ... but only when the fold's training runs determine the candidate at all: its standard error
+/// fitted without the fold at most this many times the in-sample one (they hold at least 1% of
+/// the information). Beyond, the fold's fit is free to wander (a turn-dependent wheelbase's arc
+/// part fitted without any arc), and its value says nothing about what the other runs want.
+inline constexpr double kMaxContradictionStderrRatio = 10.0;
 double contradiction_bound(double stderr_ratio, int dof);
 
 /// Family-wise level of diagnose's decision: the best candidate must have p < alpha/m over the
@@ -87,6 +92,7 @@ struct ModelSummary {
   double log_likelihood = 0.0;
   double nees_mean = 0.0;  // over all runs
   std::string verdict;     // compare's, at the same alpha
+  Calibration calibration;  // how compare calibrated that verdict
 };
 /// A comparison in brief: its log-likelihood, the NEES mean over all runs and its verdict.
 ModelSummary summarise(const Comparison& comparison);
@@ -233,6 +239,9 @@ struct DiagnoseOptions {
   /// not predict the held-out folds better than the base is a mimic and is not adopted. With
   /// false (or a suite of one experiment) they are judged in-sample only.
   bool cross_validate = true;
+  /// How the compares of the model before and after calibrate their verdicts (compare; the
+  /// referee's seed and replicates).
+  CalibrationOptions calibration;
 };
 /// `candidates`: the user's own hypotheses (custom effects, or catalogue effects with starting
 /// values), tried beside the catalogue from their given values (diagnose --candidates).
@@ -242,9 +251,12 @@ struct DiagnoseOptions {
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOptions& options,
                    DiagnoseProgress* progress = nullptr);
 /// The same with the options one by one (cross-validated).
+/// `calibration` is how the compares of the model before and after calibrate their verdicts
+/// (compare; the referee's seed and replicates).
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
                    const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr,
-                   const EffectList& candidates = {}, FitPath path = FitPath::fast);
+                   const EffectList& candidates = {}, FitPath path = FitPath::fast,
+                   const CalibrationOptions& calibration = {});
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts

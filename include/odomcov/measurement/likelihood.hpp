@@ -31,15 +31,23 @@ struct RunResidual {
   Vector3 group_column = Vector3::Zero();
   int group = -1;  // index of the run's group (group_key) in order of first appearance
   Vector3 group_column2 = Vector3::Zero();
+  /// The noise-induced part of `mean` (Prediction::noise_mean): the mean of the part of the error
+  /// that is quadratic in the heading noise, the measure of how far from Gaussian it is
+  /// (compare's choice of calibration).
+  Vector3 noise_mean = Vector3::Zero();
 };
 
 /// Residuals of every run of every experiment (runs with logs are predicted one by one, in
-/// parallel), with each run's group and group column.
+/// parallel), with each run's group and group column. A planned path's runs share one
+/// prediction, unless an effect of the model uses the absolute heading (effect_needs): then
+/// each run is predicted from its own start heading (SuiteRun::heading0_rad), as logged runs
+/// always are.
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model);
 
 /// "" when every experiment's order-2 prediction stays within kMaxSecondOrderPieces
-/// (limits.hpp; its cost is quadratic), else which experiment exceeds it. With `order` 1 always
-/// "". compare, fit and diagnose at order 2 need it empty (the CLI refuses such a suite first).
+/// (limits.hpp; its cost is quadratic), else which experiment exceeds it, for the pieces of the
+/// suite's own model (path_model_pieces). With `order` 1 always "". compare, fit and diagnose
+/// at order 2 need it empty (the CLI refuses such a suite first).
 std::string second_order_problem(const Suite& suite, int order);
 
 /// The grouped likelihood in its sequential form (the chain rule over each group's runs, in

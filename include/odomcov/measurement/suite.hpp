@@ -26,6 +26,11 @@ struct SuiteRun {
   Vector3 measured = Vector3::Zero();  // reference end pose, start frame
   std::vector<ArcSegment> pieces;   // logged runs: one piece per log row up to the reference
   std::vector<double> durations_s;  // logged runs: the time each piece took (from the t column)
+  /// The run's start heading in the reference's own world frame [rad] (the measurements'
+  /// `heading0` column, or a log's first-row heading0): what effects that use the absolute
+  /// heading see at the start; 0 where the measurements do not give it (heading0_given false).
+  double heading0_rad = 0.0;
+  bool heading0_given = false;
 };
 
 struct SuiteExperiment {
