@@ -2,11 +2,13 @@
 // data/optiodom), imported into a temporary directory by the fixture, the model of order 2
 // (the default of fit and diagnose).
 //  * BM_Likelihood: one exact evaluation (every run propagated), the unit both paths pay;
+//  * BM_CompareSimulation: compare with the in-sample loop's model (results/optiodom/
+//    model_all.yaml), its verdict calibrated by simulating the model's world (the referee);
 //  * BM_DiagnoseRound: one diagnose round from the plain model (13 candidates, two of them
 //    group_variation's: the imported sessions are groups);
 //  * BM_Fit: the joint fit of Ed and Eb;
-//  * BM_Loop: the diagnose loop (scripts/diagnose_loop.py's, in the library): diagnose, adopt
-//    the best candidate, repeat until nothing is significant or 8 rounds (fast path only).
+//  * BM_Calibrate: odomcov calibrate on every run (cross-validation included): diagnose
+//    rounds, adoption, the joint fit, confounded pairs and next experiments (fast path only).
 // Each on the fast path (FitPath::fast: linearised, re-anchored) and, with
 // ODOMCOV_BENCH_EXACT=1 in the environment, the exact one (~40 s CPU per round). The counter
 // `propagations` is the number of exact likelihood evaluations per iteration.
@@ -14,12 +16,15 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <unistd.h>
 
+#include "odomcov/measurement/calibrate.hpp"
 #include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/comparison.hpp"
 #include "odomcov/measurement/diagnosis.hpp"
 #include "odomcov/io/optiodom.hpp"
 #include "odomcov/io/suite_io.hpp"
@@ -28,28 +33,48 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// The whole OptiOdom set as a suite, imported once (as `odomcov import optiodom
-/// data/optiodom/data/diff/*/* --wheelbase 0.2 --diameters 0.084,0.084`).
+/// The whole OptiOdom set as a suite (as `odomcov import optiodom data/optiodom/data/diff/*/*
+/// --wheelbase 0.2 --diameters 0.084,0.084`), with `model` (a robot line and a model block, e.g.
+/// results/optiodom/model_all.yaml) in place of the imported robot line when given.
+odomcov::Suite import_optiodom(const std::string& model) {
+  odomcov::OptiOdomOptions options;
+  for (const auto& type : fs::directory_iterator(ODOMCOV_SOURCE_DIR "/data/optiodom/data/diff")) {
+    for (const auto& session : fs::directory_iterator(type.path())) {
+      options.sessions.push_back(session.path().string());
+    }
+  }
+  std::sort(options.sessions.begin(), options.sessions.end());
+  options.wheelbase_m = 0.2;
+  options.diameters_m = {{0.084, 0.084}};
+  const fs::path dir = fs::temp_directory_path() / ("odomcov_bench_" + std::to_string(::getpid()));
+  for (const odomcov::ImportedFile& f : odomcov::import_optiodom(options)) {
+    const fs::path p = dir / f.path;
+    fs::create_directories(p.parent_path());
+    std::string text = f.text;
+    if (f.path == "suite.yaml" && !model.empty()) {
+      const std::size_t robot = text.find("\nrobot:") + 1;
+      text.replace(robot, text.find('\n', robot) + 1 - robot, model);
+    }
+    std::ofstream(p) << text;
+  }
+  odomcov::Suite s = odomcov::load_suite((dir / "suite.yaml").string());
+  fs::remove_all(dir);
+  return s;
+}
+
+/// The whole OptiOdom set with its imported (nominal) model, imported once.
 const odomcov::Suite& optiodom() {
+  static const odomcov::Suite suite = import_optiodom("");
+  return suite;
+}
+
+/// The same with the model of the in-sample diagnose loop (results/optiodom/model_all.yaml:
+/// turn-dependent wheelbase, diameter ratio, scale, reference offset, the spin wheelbase's
+/// group_variation over the 32 sessions, turn slip), imported once.
+const odomcov::Suite& optiodom_model_all() {
   static const odomcov::Suite suite = [] {
-    odomcov::OptiOdomOptions options;
-    for (const auto& type : fs::directory_iterator(ODOMCOV_SOURCE_DIR "/data/optiodom/data/diff")) {
-      for (const auto& session : fs::directory_iterator(type.path())) {
-        options.sessions.push_back(session.path().string());
-      }
-    }
-    std::sort(options.sessions.begin(), options.sessions.end());
-    options.wheelbase_m = 0.2;
-    options.diameters_m = {{0.084, 0.084}};
-    const fs::path dir = fs::temp_directory_path() / ("odomcov_bench_" + std::to_string(::getpid()));
-    for (const odomcov::ImportedFile& f : odomcov::import_optiodom(options)) {
-      const fs::path p = dir / f.path;
-      fs::create_directories(p.parent_path());
-      std::ofstream(p) << f.text;
-    }
-    odomcov::Suite s = odomcov::load_suite((dir / "suite.yaml").string());
-    fs::remove_all(dir);
-    return s;
+    std::ifstream in(ODOMCOV_SOURCE_DIR "/results/optiodom/model_all.yaml");
+    return import_optiodom(std::string(std::istreambuf_iterator<char>(in), {}));
   }();
   return suite;
 }
@@ -88,31 +113,28 @@ void BM_DiagnoseRound(benchmark::State& state) {
   state.counters["runs"] = static_cast<double>(runs(suite));
 }
 
-/// The library loop of scripts/diagnose_loop.py: diagnose, adopt the best candidate's model,
-/// repeat until no candidate is significant (or kLoopRounds rounds). Counters: rounds done,
-/// propagations in all, the NEES mean of the final model.
-constexpr int kLoopRounds = 8;
-
-void BM_Loop(benchmark::State& state) {
+/// odomcov calibrate in the library: diagnose rounds with cross-validation over the four path
+/// types (each finalist refitted on each fold's complement), adoption, the joint fit, the
+/// confounded pairs and the next experiments. Counters: rounds, propagations in all, the NEES
+/// mean of the final model, the effects named.
+void BM_Calibrate(benchmark::State& state) {
   const odomcov::Suite& suite = optiodom();
-  double rounds = 0, propagations = 0, nees = 0;
+  double rounds = 0, propagations = 0, nees = 0, named = 0;
   for (auto _ : state) {
-    odomcov::SuiteModel model = odomcov::suite_model(suite);
+    odomcov::CalibrateOptions options;
+    options.diagnose.path = path_of(state);
     odomcov::DiagnoseProgress progress;
-    int round = 0;
-    for (; round < kLoopRounds; ++round) {
-      const odomcov::Diagnosis d = odomcov::diagnose(suite, model, odomcov::kDiagnoseAlpha, {},
-                                                     &progress, {}, path_of(state));
-      nees = d.after.nees_mean;
-      if (!d.best) break;
-      model = d.candidates[*d.best].model;
-    }
-    rounds = round + (round < kLoopRounds ? 1 : 0);  // the last round names nothing
+    const odomcov::CalibrateResult c =
+        odomcov::calibrate(suite, odomcov::suite_model(suite), options, nullptr, &progress);
+    rounds = static_cast<double>(c.rounds.size());
     propagations = static_cast<double>(progress.evaluations.load());
+    nees = c.after.nees_mean;
+    named = static_cast<double>(c.named.size());
   }
   state.counters["rounds"] = rounds;
   state.counters["propagations"] = propagations;
   state.counters["nees"] = nees;
+  state.counters["named"] = named;
 }
 
 void BM_Fit(benchmark::State& state) {
@@ -131,11 +153,35 @@ void BM_Fit(benchmark::State& state) {
   state.counters["propagations"] = propagations;
 }
 
+/// compare on all 171 runs with the in-sample loop's model, calibrated by the referee (the
+/// model has group_variation, so the automatic choice simulates): the whole compare, residuals
+/// included, at alpha = 0.001 (compare's default; arg 0) and 0.01 (diagnose's; arg 1), seed 1.
+/// Counters: the replicates the looks took, the family-wise p-value, and the wall time per
+/// 1000 replicates (the cost of a close call, which looks up to 1599).
+void BM_CompareSimulation(benchmark::State& state) {
+  const odomcov::Suite& suite = optiodom_model_all();
+  const odomcov::SuiteModel model = odomcov::suite_model(suite);
+  const double alpha = state.range(0) == 0 ? 0.001 : 0.01;
+  double replicates = 0, p = 0, seconds = 0;
+  for (auto _ : state) {
+    const auto start = std::chrono::steady_clock::now();
+    const odomcov::Comparison c = odomcov::compare(suite, model, alpha);
+    seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    replicates = static_cast<double>(c.calibration.replicates);
+    p = c.calibration.p_value;
+  }
+  state.counters["replicates"] = replicates;
+  state.counters["p_family"] = p;
+  state.counters["s_per_1000_replicates"] = 1000.0 * seconds / replicates;
+  state.counters["runs"] = static_cast<double>(runs(suite));
+}
+
 const bool kExact = std::getenv("ODOMCOV_BENCH_EXACT") != nullptr;
 
 BENCHMARK(BM_Likelihood)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
+BENCHMARK(BM_CompareSimulation)->Arg(0)->Arg(1)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 BENCHMARK(BM_DiagnoseRound)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
-BENCHMARK(BM_Loop)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
+BENCHMARK(BM_Calibrate)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
 BENCHMARK(BM_Fit)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 const bool kRegistered = kExact && [] {
   benchmark::RegisterBenchmark("BM_DiagnoseRound/exact", [](benchmark::State& s) { BM_DiagnoseRound(s); })

@@ -7,6 +7,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "odomcov/measurement/calibrate.hpp"
 #include "odomcov/measurement/calibration.hpp"
 #include "odomcov/measurement/comparison.hpp"
 #include "odomcov/measurement/config.hpp"
@@ -20,7 +21,8 @@
 #include "odomcov/measurement/validation.hpp"
 #include "odomcov/io/config_io.hpp"
 #include "odomcov/io/suite_io.hpp"
-#include "failures.hpp"  // src/cli: the failures in words
+#include "calibrate_output.hpp"  // src/cli: diagnose's and calibrate's JSON, as the CLI writes it
+#include "failures.hpp"          // src/cli: the failures in words
 
 namespace py = pybind11;
 using namespace odomcov;
@@ -257,52 +259,37 @@ py::dict fit_py(const Suite& suite, const std::vector<std::string>& params) {
   return out;
 }
 
-py::dict summary_dict(const ModelSummary& s) {
-  py::dict d;
-  d["log_likelihood"] = s.log_likelihood;
-  d["nees_mean"] = s.nees_mean;
-  d["verdict"] = s.verdict;
-  return d;
-}
+/// A JSON document of the command line as Python objects (dicts, lists, numbers, None).
+py::object to_python(const nlohmann::json& doc) { return py::module_::import("json").attr("loads")(doc.dump()); }
 
-py::dict diagnose_py(const Suite& suite, double alpha, const std::vector<std::string>& only) {
+py::object diagnose_py(const Suite& suite, double alpha, const std::vector<std::string>& only) {
   Diagnosis dg;
   {
     py::gil_scoped_release release;
     dg = diagnose(suite, suite_model(suite), alpha, only);
   }
-  py::list candidates;
-  for (const Candidate& c : dg.candidates) {
-    py::dict d, values, stderrs;
-    for (std::size_t i = 0; i < c.parameters.size(); ++i) {
-      values[c.parameters[i].c_str()] = c.values[i];
-      stderrs[c.parameters[i].c_str()] = c.stderrs[i];
-    }
-    d["effect"] = c.effect;
-    d["parameters"] = values;
-    d["stderr"] = stderrs;
-    d["delta_log_likelihood"] = c.delta_log_likelihood;
-    d["delta_bic"] = c.delta_bic;
-    d["p_value"] = c.p_value;
-    d["significant"] = c.significant;
-    d["yaml"] = candidate_yaml(c, suite_model(suite));
-    candidates.append(d);
+  return to_python(cli::diagnosis_json(suite, suite_model(suite), dg));
+}
+
+py::object calibrate_py(const Suite& suite, double alpha, int rounds, const py::object& holdout,
+                        const py::object& candidates, int order) {
+  if (rounds < 1) throw py::value_error("rounds must be at least 1");
+  if (order != 1 && order != 2) throw py::value_error("order must be 1 or 2");
+  if (!(alpha > 0 && alpha < 1)) throw py::value_error("alpha must be in (0, 1)");
+  CalibrateOptions options;
+  options.rounds = rounds;
+  options.diagnose.alpha = alpha;
+  options.diagnose.candidates = effects_from_python(candidates);
+  SuiteModel start = suite_model(suite);
+  start.order = order;
+  const Suite* held = holdout.is_none() ? nullptr : &holdout.cast<const Suite&>();
+  CalibrateResult c;
+  {
+    py::gil_scoped_release release;
+    c = calibrate(suite, start, options, held);
   }
-  py::dict out;
-  out["before"] = summary_dict(dg.before);
-  out["candidates"] = candidates;
-  out["best"] = dg.best ? candidates[*dg.best] : py::none();
-  out["after"] = summary_dict(dg.after);
-  out["explained"] = dg.explained;
-  py::list residuals;
-  for (const ResidualAlignment& r : dg.residuals) {
-    py::dict a;
-    a["feature"] = r.feature;
-    a["p_value"] = r.p_value;
-    a["description"] = r.description;
-    residuals.append(a);
-  }
-  if (!dg.explained) out["residuals"] = residuals;
+  py::object out = to_python(cli::calibrate_json(suite, start, c, alpha));
+  out["diff_drive_yaml"] = cli::diff_drive_yaml(suite, c.diff_drive);
   return out;
 }
 
@@ -385,5 +372,12 @@ sample; with them, the propagation engine.)");
         "Maximum-likelihood fit of the named parameters, like `odomcov fit --json`.");
   m.def("diagnose", &diagnose_py, py::arg("suite"), py::arg("alpha") = kDiagnoseAlpha,
         py::arg("effects") = std::vector<std::string>{},
-        "Which effect is the model missing? Like `odomcov diagnose --json` (main keys).");
+        "Which effect is the model missing? `odomcov diagnose --json`'s document.");
+  m.def("calibrate", &calibrate_py, py::arg("suite"), py::arg("alpha") = kDiagnoseAlpha,
+        py::arg("rounds") = kCalibrateRounds, py::arg("holdout") = py::none(),
+        py::arg("candidates") = py::none(), py::arg("order") = 2,
+        R"(The whole loop, like `odomcov calibrate`: its calibrate.json as a dict, plus
+"diff_drive_yaml" (the text of diff_drive.yaml). holdout: another Suite to judge the final
+model on; candidates: your own hypotheses, as `predict`'s effects (custom ones with their
+starting values).)");
 }

@@ -379,12 +379,14 @@ def verdict_lines(report, top=3):
     alpha = report.get("alpha", 0.01)
     aligned = [r for r in testable if r["p_value"] < alpha][:top]
     if aligned:
-        lines.append("  The remaining misfit lines up with (p family-wise over the features):")
+        lines.append("  The remaining misfit lines up with (mean: the experiments' mean errors; scatter: "
+                     "their spread; p family-wise over the features and parts):")
     elif testable:
         lines.append("  The remaining misfit lines up with no path feature at alpha; the closest:")
         aligned = testable[:1]
     for r in aligned:
-        lines.append(f"  - {r['feature']}: p = {r['p_value']:.2g}: {r['description']}")
+        part = f", {r['part']}" if r.get("part") else ""
+        lines.append(f"  - {r['feature']}{part}: p = {r['p_value']:.2g}: {r['description']}")
     return lines
 
 

@@ -78,7 +78,7 @@ def main():
                 print(f"| {name} | {label} | " + " | ".join(cells(c, types, field)) + extra + " |")
     print("\n## Verdict of the last diagnose round (in-sample)\n")
     for name, r in runs:
-        top = [f"{x['feature']} (p = {x['p_value']:.2g})" for x in r.get("residuals") or []
+        top = [f"{x['feature']}{', ' + x['part'] if x.get('part') else ''} (p = {x['p_value']:.2g})" for x in r.get("residuals") or []
                if x.get("p_value") is not None and x["p_value"] < r.get("alpha", 0.01)][:3]
         verdict = "explained" if r.get("explained") else "not explained"
         print(f"- {name}: {verdict}" + (f"; the misfit lines up with {', '.join(top)}" if top else ""))

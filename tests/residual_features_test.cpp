@@ -5,6 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <boost/math/distributions/binomial.hpp>
+#include <map>
+
 #include "odomcov/measurement/diagnosis.hpp"
 #include "odomcov/measurement/odometry_correction.hpp"
 #include "odomcov/engine/propagation.hpp"
@@ -64,6 +67,11 @@ TEST(PathFeatures, PlannedPaths) {
   const PathFeatures arc = f("arc-left-slow");
   EXPECT_NEAR(arc.spin_fraction, 0.2, 1e-12);  // B |kappa| / 2 = 0.4 / 2
   EXPECT_EQ(arc.turn_direction, 1.0);
+  // Starts and stops: a start and a stop at 0.15 m/s, per wheel; forward-back also reverses
+  // (0.15 -> -0.15); a spin starts and stops each wheel once (-0.15, +0.15).
+  EXPECT_NEAR(line.acceleration_mps, 0.3, 1e-12);
+  EXPECT_NEAR(back.acceleration_mps, 0.6, 1e-12);
+  EXPECT_NEAR(spin.acceleration_mps, 0.3, 1e-12);
 }
 
 TEST(PathFeatures, LoggedRunsUseTheirTimeAndIgnoreJitter) {
@@ -79,6 +87,65 @@ TEST(PathFeatures, LoggedRunsUseTheirTimeAndIgnoreJitter) {
   EXPECT_EQ(f.reversals, 2.0);  // one per wheel
   EXPECT_NEAR(f.speed_mps, (1.0 * 0.5 + 2 * 0.002 * 0.02 + 0.5 * 0.25) / 1.504, 1e-12);
   EXPECT_NEAR(f.travel_direction, 0.5 / 1.504, 1e-12);
+  // 0 -> 0.5 -> -0.25 -> 0 m/s; the jitter (+-0.02 m/s) is below kAccelerationHysteresis_mps.
+  EXPECT_NEAR(f.acceleration_mps, 0.5 + 0.75 + 0.25, 1e-12);
+}
+
+/// On labs where the model is right (configs/worlds/plain.yaml's standard set, 200 seeds), each
+/// feature's mean and scatter tests reject at their nominal 5%: the count of raw p < 0.05 out of
+/// 200 stays within the binomial(200, 0.05) interval of probability 1 - 1e-4/16 per test
+/// (Bonferroni over the 16 testable tests), [1, 25]. Measured: 8 to 16.
+TEST(ResidualFeatures, BothPartsHaveTheirSizeOnCorrectModels) {
+  WorldFile w = load_world(kSource + "/configs/worlds/plain.yaml");
+  constexpr int kLabs = 200;
+  std::map<std::string, int> rejected, tested;
+  for (int i = 0; i < kLabs; ++i) {
+    w.seed = 1000 + static_cast<std::uint64_t>(i);
+    Suite s;
+    s.robot = w.robot;
+    s.measurement_noise = w.measurement_noise;
+    for (std::size_t e = 0; e < w.experiments.size(); ++e) {
+      SuiteExperiment ex;
+      ex.name = w.experiments[e].name;
+      ex.path = w.experiments[e].path;
+      const std::vector<Vector3> measured = synthesize(w, e, 0);
+      for (std::size_t r = 0; r < measured.size(); ++r) ex.runs.push_back({std::to_string(r), measured[r], {}, {}});
+      s.experiments.push_back(std::move(ex));
+    }
+    const SuiteModel model = suite_model(s);
+    for (const ResidualAlignment& a : residual_alignment(s, model, residuals(s, model))) {
+      if (!a.testable) continue;
+      ++tested[a.feature + ", " + a.part];
+      rejected[a.feature + ", " + a.part] += a.p_value_raw < 0.05 ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(tested.size(), 16u);  // 8 features x 2 parts (group: one experiment per group)
+  const boost::math::binomial null(kLabs, 0.05);
+  const double risk = 1e-4 / static_cast<double>(tested.size());
+  const double lower = boost::math::quantile(null, risk / 2), upper = boost::math::quantile(boost::math::complement(null, risk / 2));
+  for (const auto& [name, n] : tested) {
+    EXPECT_EQ(n, kLabs) << name;
+    EXPECT_GE(rejected[name], lower) << name;
+    EXPECT_LE(rejected[name], upper) << name;
+    std::cout << "  " << name << ": " << rejected[name] << " of " << n << " at 0.05\n";
+  }
+}
+
+// Wheel noise that grows with speed (k 0.7e-3 at 0.15 m/s, 2e-3 at 0.6 m/s, against the nominal
+// 1e-3): no mean misfit, a spread too small on the slow runs and too large on the fast ones. The
+// misfit lines up with speed on the scatter first, significantly.
+TEST(ResidualFeatures, SpeedDependentNoiseLinesUpWithSpeedOnTheScatter) {
+  const Suite s = lab({kSource + "/tests/data/worlds/noise_slow.yaml",
+                       kSource + "/tests/data/worlds/noise_fast.yaml"});
+  const SuiteModel model = suite_model(s);
+  const std::vector<ResidualAlignment> r = residual_alignment(s, model, residuals(s, model));
+  for (const ResidualAlignment& a : r) {
+    std::cout << "  " << a.feature << ", " << a.part << ": p = " << a.p_value << (a.testable ? "" : " (untestable)") << "\n";
+  }
+  ASSERT_GE(r.size(), 2u);
+  EXPECT_EQ(r.front().feature, "speed");
+  EXPECT_EQ(r.front().part, "scatter");
+  EXPECT_LT(r.front().p_value, kDiagnoseAlpha);
 }
 
 bool says_explains(const std::string& text) { return text.find("explains") != std::string::npos; }
@@ -101,7 +168,7 @@ TEST(Verdict, SpeedDependentScaleIsNotExplainedAndPointsAtSpeed) {
   const std::string words = verdict_text(d);
   EXPECT_FALSE(says_explains(words)) << words;
   EXPECT_NE(words.find("still inconsistent"), std::string::npos) << words;
-  EXPECT_NE(words.find("speed (p = "), std::string::npos) << words;
+  EXPECT_NE(words.find("speed, mean (p = "), std::string::npos) << words;
 }
 
 TEST(Verdict, PlainLabIsExplained) {

@@ -13,6 +13,7 @@ from ._odomcov import (  # noqa: F401
     arc_covariance,
     arc_displacement,
     arc_transition,
+    calibrate,
     compare,
     diagnose,
     fit,

@@ -119,10 +119,30 @@ def test_suite_commands(tmp_path):
     # what the misfit lines up with.
     assert d["explained"] == (d["after"]["verdict"] == "consistent")
     assert d["explained"] or "residuals" in d
+    assert all(c["verdict"] in ("adopted", "mimic", "stopped", "not significant", "not judged")
+               for c in d["candidates"])
     with pytest.raises(ValueError):
         odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "nan.yaml"))
 
 
+def test_calibrate_gives_calibrate_json():
+    # A small logged suite (one experiment of two runs: nothing to cross-validate): the keys of
+    # calibrate.json, its own runs as held-out runs inside its training domain, bad arguments.
+    suite = odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "good_logs.yaml"))
+    c = odomcov.calibrate(suite, rounds=2)
+    for key in ("rounds", "named", "explained", "candidates_cv", "confounded", "next_experiments",
+                "model", "diff_drive"):
+        assert key in c, key
+    assert c["explained"] == (c["after"]["verdict"] == "consistent")
+    assert "domain:" in c["model"]["yaml"]
+    assert c["diff_drive_yaml"].startswith("# diff_drive_controller parameters")
+    held = odomcov.calibrate(suite, rounds=1, holdout=suite)
+    assert set(held["holdout"]) >= {"nees_mean", "verdict", "by_kind", "extrapolation"}
+    assert held["holdout"]["extrapolation"] == []  # its own runs lie in its training domain
+    with pytest.raises(ValueError):
+        odomcov.calibrate(suite, rounds=0)
+    with pytest.raises(ValueError):
+        odomcov.calibrate(suite, candidates=[{"custom": {"name": "x", "parameters": {"a": 0}, "scale": "1 + b"}}])
 def test_predict_takes_the_languages_new_keys():
     # lateral, noise and random (a per-run parameter with its sd) through the configs' own
     # parser, and the start heading for `heading`: a slip to the left of 4 mm per metre on a

@@ -11,9 +11,15 @@ const char* const kComponent[3] = {"x", "y", "theta"};
 const char* const kUnit[3] = {"m", "m", "rad"};
 
 std::string tails_text(const Comparison& c) {
-  return std::string(c.kurtosis.statistic > 0 ? "tails heavier" : "tails lighter") +
-         " than Gaussian: Mardia kurtosis " + format_number(c.mardia_b2, "%.1f") + " against " +
-         format_number(c.mardia_expected, "%.1f") + ", p = " + format_number(c.kurtosis.p_value, "%.2g");
+  const std::string p = ", p = " + format_number(c.kurtosis.p_value, "%.2g");
+  const std::string b2 = "Mardia kurtosis " + format_number(c.mardia_b2, "%.1f") + " against ";
+  if (c.calibration.method == CalibrationMethod::simulation) {
+    return std::string(c.mardia_b2 > c.mardia_model ? "tails heavier" : "tails lighter") +
+           " than the model's world: " + b2 + format_number(c.mardia_model, "%.1f") +
+           " there (" + format_number(c.mardia_expected, "%.1f") + " if Gaussian)" + p;
+  }
+  return std::string(c.kurtosis.statistic > 0 ? "tails heavier" : "tails lighter") + " than Gaussian: " +
+         b2 + format_number(c.mardia_expected, "%.1f") + p;
 }
 
 }  // namespace

@@ -4,8 +4,10 @@
 #include <iostream>
 #include <sstream>
 
+#include "calibrate_output.hpp"
 #include "commands.hpp"
 #include "odomcov/measurement/calibration.hpp"
+#include "odomcov/measurement/design.hpp"
 #include "odomcov/base/error.hpp"
 #include "odomcov/measurement/likelihood.hpp"
 #include "odomcov/io/suite_io.hpp"
@@ -61,43 +63,6 @@ std::string fit_report(const Suite& suite, const FitResult& r) {
   return out.str();
 }
 
-/// A finite number as JSON; null otherwise (no standard error, undefined correlation).
-json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-
-/// The estimates' correlation matrix (rows of the covariance scaled by the standard errors).
-json correlation_json(const Eigen::MatrixXd& covariance) {
-  json corr = json::array();
-  for (Eigen::Index i = 0; i < covariance.rows(); ++i) {
-    json row = json::array();
-    for (Eigen::Index j = 0; j < covariance.cols(); ++j) {
-      row.push_back(finite_or_null(covariance(i, j) / std::sqrt(covariance(i, i) * covariance(j, j))));
-    }
-    corr.push_back(row);
-  }
-  return corr;
-}
-
-/// The JSON document of a fit: estimates, standard errors (plain and robust), correlations,
-/// log-likelihoods, evaluations, the model's YAML and the warnings.
-json fit_json(const FitResult& r) {
-  json parameters = json::object(), stderrs = json::object(), robust = json::object();
-  for (std::size_t i = 0; i < r.names.size(); ++i) {
-    const auto k = static_cast<Eigen::Index>(i);
-    parameters[r.names[i]] = r.values(k);
-    stderrs[r.names[i]] = finite_or_null(r.stderrs(k));
-    robust[r.names[i]] = finite_or_null(r.robust_stderrs(k));
-  }
-  return {{"parameters", parameters},
-          {"stderr", stderrs},
-          {"stderr_robust", robust},
-          {"correlation", correlation_json(r.covariance)},
-          {"log_likelihood_before", r.log_likelihood_before},
-          {"log_likelihood_after", r.log_likelihood_after},
-          {"evaluations", r.evaluations},
-          {"yaml", model_yaml(r.model)},
-          {"warnings", r.warnings}};
-}
-
 int run_fit(const FitOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
   if (opt.params.empty()) throw UsageError("--params needs at least one parameter");
@@ -116,8 +81,14 @@ int run_fit(const FitOptions& opt) {
   const FitResult r = fit(suite, model, opt.params, Likelihood::full, &evaluations,
                             opt.exact ? FitPath::exact : FitPath::fast);
   bar.finish();
-  std::cout << fit_report(suite, r);
-  if (!opt.json.empty()) write_json_atomic(opt.json, fit_json(r));
+  const std::vector<ConfoundedPair> confounded = confounded_pairs(r.names, estimate_covariance(suite, r));
+  const std::vector<NextExperiment> next = next_experiments(suite, r);
+  std::cout << fit_report(suite, r) << design_report(confounded, next);
+  if (!opt.json.empty()) {
+    json doc = fit_json(r);
+    doc.update(design_json(confounded, next));
+    write_json_atomic(opt.json, doc);
+  }
   return kExitOk;
 }
 

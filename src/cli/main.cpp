@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   setup_fit(app, exit_code);
   setup_umbmark(app, exit_code);
   setup_diagnose(app, exit_code);
+  setup_calibrate(app, exit_code);
   setup_import(app, exit_code);
   setup_predict(app, exit_code);
   try {

@@ -20,6 +20,8 @@
 
 namespace odomcov::cli {
 
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
 json to_json(const Vector3& v) { return json::array({v.x(), v.y(), v.z()}); }
 
 json to_json(const Matrix3& m) {

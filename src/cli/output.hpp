@@ -32,6 +32,9 @@ json moments_json(const Vector3& mean, const Matrix3& cov);
 /// is:", each as indented rows.
 std::string moments_text(const Vector3& mean, const Matrix3& cov);
 
+/// A finite number as JSON; null otherwise (no standard error, not cross-validated).
+json finite_or_null(double v);
+
 /// {statistic, dof, p_value}; statistic and p_value are null when the test is not applicable.
 json test_json(const TestResult& t);
 std::string test_text(const TestResult& t);

@@ -31,13 +31,17 @@ std::string duration_text(double seconds) {
 bool ProgressBar::enabled() { return ::isatty(STDERR_FILENO) == 1; }
 
 ProgressBar::ProgressBar(std::function<std::int64_t()> done, std::int64_t total, std::string unit)
-    : done_(std::move(done)), total_([total] { return total; }), unit_(std::move(unit)),
+    : done_(std::move(done)), total_([total] { return total; }), unit_([unit] { return unit; }),
       start_(std::chrono::steady_clock::now()) {
   if (enabled() && total > 0) thread_ = std::thread([this] { loop(); });
 }
 
 ProgressBar::ProgressBar(std::function<std::int64_t()> done, std::function<std::int64_t()> total,
                          std::string unit)
+    : ProgressBar(std::move(done), std::move(total), std::function<std::string()>([unit] { return unit; })) {}
+
+ProgressBar::ProgressBar(std::function<std::int64_t()> done, std::function<std::int64_t()> total,
+                         std::function<std::string()> unit)
     : done_(std::move(done)), total_(std::move(total)), unit_(std::move(unit)),
       start_(std::chrono::steady_clock::now()) {
   if (enabled()) thread_ = std::thread([this] { loop(); });
@@ -67,7 +71,7 @@ void ProgressBar::loop() {
 void ProgressBar::draw(std::int64_t done, double elapsed_s) {
   const std::int64_t total = total_();
   if (total <= 0) {
-    std::fprintf(stderr, "\r\033[K%lld %s  %s", static_cast<long long>(done), unit_.c_str(),
+    std::fprintf(stderr, "\r\033[K%lld %s  %s", static_cast<long long>(done), unit_().c_str(),
                  duration_text(elapsed_s).c_str());
     std::fflush(stderr);
     drawn_ = true;
@@ -80,7 +84,7 @@ void ProgressBar::draw(std::int64_t done, double elapsed_s) {
   const std::string eta =
       fraction > 0 ? duration_text(elapsed_s * (1.0 - fraction) / fraction) : std::string("?");
   std::fprintf(stderr, "\r\033[K[%s] %3.0f%%  %lld/%lld %s  ETA %s", bar.c_str(), 100 * fraction,
-               static_cast<long long>(done), static_cast<long long>(total), unit_.c_str(),
+               static_cast<long long>(done), static_cast<long long>(total), unit_().c_str(),
                eta.c_str());
   std::fflush(stderr);
   drawn_ = true;

@@ -19,6 +19,9 @@ class ProgressBar {
   /// shows a counter and the elapsed time instead.
   ProgressBar(std::function<std::int64_t()> done, std::function<std::int64_t()> total,
               std::string unit);
+  /// The same with a label that changes as the work goes ("fits, round 3"), polled like `done`.
+  ProgressBar(std::function<std::int64_t()> done, std::function<std::int64_t()> total,
+              std::function<std::string()> unit);
   ~ProgressBar();
   ProgressBar(const ProgressBar&) = delete;
   ProgressBar& operator=(const ProgressBar&) = delete;
@@ -34,7 +37,7 @@ class ProgressBar {
 
   std::function<std::int64_t()> done_;
   std::function<std::int64_t()> total_;
-  std::string unit_;
+  std::function<std::string()> unit_;
   std::atomic<bool> stop_{false};
   bool drawn_ = false;
   std::chrono::steady_clock::time_point start_;

@@ -40,6 +40,9 @@ class Bumps final : public Effect {
       to_next += -std::log(1.0 - draws.uniform(sample, i + 2)) / rate_;
     }
   }
+  std::string non_gaussian() const override {
+    return rate_ > 0 && sigma_ > 0 ? "Poisson impulses (heavy tails)" : "";
+  }
   std::string check_samples(double max_mean_travel_m) const override {
     const double per_sample = rate_ * max_mean_travel_m;
     if (per_sample <= kMaxMeanBumpsPerSample) return "";
@@ -150,7 +153,11 @@ EffectType bumps_type() {
            // sigma from the tails, and lets the kurtosis decide against the noise level.
            /*diagnose_fitted=*/{"rate"},
            /*complete=*/complete_bumps,
-           /*confused_with=*/kWheelNoiseLevel},
+           /*confused_with=*/kWheelNoiseLevel,
+           /*rescale_tails=*/[](EffectSpec& spec, double factor) {
+             spec.values[1] *= factor;
+             spec.values[0] /= factor * factor;
+           }},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<Bumps>(v[0], v[1]);
           }};

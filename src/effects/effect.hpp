@@ -265,6 +265,11 @@ class Effect {
     (void)sample, (void)state, (void)draws, (void)extra_left, (void)extra_right;
   }
 
+  /// World side: "" when the effect adds only Gaussian noise or deterministic changes, else what
+  /// makes the errors it gives non-Gaussian ("a radius drawn once per run"): compare then
+  /// calibrates its tests by simulating the model's world (non_gaussian_effect).
+  virtual std::string non_gaussian() const { return ""; }
+
   // ---- Model side (first order in the effect) ------------------------------------------------
   /// Number of standard-normal per-run constants this effect contributes columns for.
   virtual int run_constants() const { return 0; }

@@ -268,6 +268,15 @@ std::vector<std::unique_ptr<Effect>> instantiate(const EffectList& list) {
 }
 
 }  // namespace effects
+
+std::string non_gaussian_effect(const EffectList& list) {
+  const auto objects = effects::instantiate(list);
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    if (std::string why = objects[i]->non_gaussian(); !why.empty()) return list[i].name + ": " + why;
+  }
+  return "";
+}
+
 FitCoordinate fit_coordinate(const EffectParameterInfo& p) {
   FitCoordinate c;
   const double scale = std::abs(p.typical - p.neutral);

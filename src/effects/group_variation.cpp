@@ -66,7 +66,16 @@ EffectList group_effects(const EffectList& list, std::uint64_t seed, const std::
 namespace effects {
 namespace {
 
-class GroupVariation final : public Effect {};
+class GroupVariation final : public Effect {
+ public:
+  explicit GroupVariation(double sd) : sd_(sd) {}
+  std::string non_gaussian() const override {
+    return sd_ > 0 ? "a parameter drawn once per group (a mean that is nonlinear in the draw)" : "";
+  }
+
+ private:
+  double sd_;
+};
 
 }  // namespace
 
@@ -79,8 +88,8 @@ EffectType group_variation_type() {
            "differs between groups, beyond what the noise explains",
            "`parameter` (e.g. wheelbase_error.Eb) drawn once per group from N(value, sd^2)",
            /*systematic=*/true, /*heavy_tails=*/false, /*grouped=*/true},
-          [](const std::vector<double>&) -> std::unique_ptr<Effect> {
-            return std::make_unique<GroupVariation>();
+          [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
+            return std::make_unique<GroupVariation>(v[0]);
           }};
 }
 

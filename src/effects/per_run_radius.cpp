@@ -21,6 +21,9 @@ class PerRunRadius final : public Effect {
     out.push_back({1, true, 1, leg.travel_right, 1.0});  // eps_R x travel_right
   }
   int run_constants() const override { return 2; }
+  std::string non_gaussian() const override {
+    return sigma_ > 0 ? "a radius drawn once per run (products of per-run and per-sample errors)" : "";
+  }
   void model(PieceModel& piece) const override {
     piece.run_columns.emplace_back(sigma_ * piece.scale_left * piece.encoder.left_m, 0.0, 0.0);
     piece.run_columns.emplace_back(0.0, sigma_ * piece.scale_right * piece.encoder.right_m, 0.0);

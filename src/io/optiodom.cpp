@@ -303,7 +303,7 @@ std::string suite_text(const Metadata& meta, const Nominal& robot, const OptiOdo
   doc.robot = Robot{robot.wheelbase, {options.k, options.k}};
   doc.measurement_noise = options.measurement_noise;
   for (const auto& [name, logs] : imported.experiments) {
-    doc.experiments.push_back({name, "", "", logs, imported.groups.at(name)});
+    doc.experiments.push_back({name, "", "", logs, imported.groups.at(name), {}});
   }
   return suite_yaml(doc);
 }

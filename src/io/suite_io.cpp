@@ -142,14 +142,12 @@ std::vector<SuiteRun> load_logged_runs(const Where& lw, const YAML::Node& logs,
 SuiteExperiment parse_experiment(const Where& xw, const YAML::Node& node, const std::string& file,
                                  const std::filesystem::path& dir, double wheelbase_m,
                                  std::set<std::string>& names) {
-  yaml::require_map(xw, node, {"name", "path", "measurements", "logs", "group"});
+  yaml::require_map(xw, node, {"name", "path", "measurements", "logs", "group", "kind"});
   SuiteExperiment ex;
   ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
   if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate experiment name");
-  if (node["group"]) {
-    ex.group = yaml::to_string(xw.child("group"), node["group"]);
-    if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
-  }
+  ex.group = yaml::optional_text(xw, node, "group");
+  ex.kind = yaml::optional_text(xw, node, "kind", default_kind(ex.name));
   const bool has_measurements = node["measurements"].IsDefined();
   const bool has_logs = node["logs"].IsDefined();
   if (has_measurements == has_logs) {
@@ -166,6 +164,32 @@ SuiteExperiment parse_experiment(const Where& xw, const YAML::Node& node, const 
   ex.logged = true;
   ex.runs = load_logged_runs(xw.child("logs"), node["logs"], dir, wheelbase_m);
   return ex;
+}
+
+/// The largest value of each domain feature that is a number anyone measured: speeds and
+/// lengths as kMaxLength_m (per second), spin fractions are fractions, and durations up to
+/// 1e9 s (30 years).
+constexpr double kMaxDomainDuration_s = 1e9;
+
+/// One `[lo, hi]` range of a domain: two finite numbers, 0 <= lo <= hi <= `max`.
+Domain::Range parse_range(const Where& w, const YAML::Node& node, double max) {
+  yaml::require_sequence(w, node);
+  if (node.size() != 2) yaml::fail(w, node, "expected [lo, hi]");
+  const Domain::Range r{yaml::to_number(w.index(0), node[0]), yaml::to_number(w.index(1), node[1])};
+  if (!(r.lo >= 0 && r.hi <= max)) yaml::fail(w, node, "must lie in [0, " + format_number(max) + "]");
+  if (!(r.lo <= r.hi)) yaml::fail(w, node, "lo must not exceed hi");
+  return r;
+}
+
+/// `model: domain:` (docs/formats.md): the training ranges calibrate records, every key given.
+Domain parse_domain(const Where& w, const YAML::Node& node) {
+  yaml::require_map(w, node, {"speed", "spin_fraction", "length", "duration"});
+  Domain d;
+  d.speed_mps = parse_range(w.child("speed"), yaml::require(w, node, "speed"), kMaxLength_m);
+  d.spin_fraction = parse_range(w.child("spin_fraction"), yaml::require(w, node, "spin_fraction"), 1.0);
+  d.length_m = parse_range(w.child("length"), yaml::require(w, node, "length"), kMaxLength_m);
+  d.duration_s = parse_range(w.child("duration"), yaml::require(w, node, "duration"), kMaxDomainDuration_s);
+  return d;
 }
 
 }  // namespace
@@ -207,8 +231,9 @@ Suite load_suite_unguarded(const std::string& file) {
     suite.measurement_noise = parse_measurement_noise(noise, file, "measurement_noise");
   }
   if (const YAML::Node model = root["model"]) {
-    yaml::require_map(where.child("model"), model, {"effects"});
+    yaml::require_map(where.child("model"), model, {"effects", "domain"});
     if (model["effects"]) suite.model_effects = parse_effects(model["effects"], file, "model.effects");
+    if (model["domain"]) suite.model_domain = parse_domain(where.child("model").child("domain"), model["domain"]);
   }
   const Where ew = where.child("experiments");
   const YAML::Node list = yaml::require(where, root, "experiments");

@@ -80,6 +80,7 @@ std::string suite_yaml(const SuiteDocument& suite) {
   for (const SuiteDocument::Experiment& ex : suite.experiments) {
     out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << YAML::DoubleQuoted << ex.name;
     if (!ex.group.empty()) out << YAML::Key << "group" << YAML::Value << YAML::DoubleQuoted << ex.group;
+    if (!ex.kind.empty()) out << YAML::Key << "kind" << YAML::Value << YAML::DoubleQuoted << ex.kind;
     if (!ex.logs.empty()) {
       out << YAML::Key << "logs" << YAML::Value << YAML::BeginSeq;
       for (const std::string& log : ex.logs) out << YAML::DoubleQuoted << log;

@@ -79,7 +79,7 @@ WorldFile load_world_unguarded(const std::string& file) {
   for (std::size_t i = 0; i < list.size(); ++i) {
     const Where xw = ew.index(i);
     const YAML::Node node = list[i];
-    yaml::require_map(xw, node, {"name", "runs", "path", "group", "heading0"});
+    yaml::require_map(xw, node, {"name", "runs", "path", "group", "kind", "heading0"});
     WorldExperiment ex;
     ex.line = yaml::line_of(node);
     ex.name = yaml::to_string(xw.child("name"), yaml::require(xw, node, "name"));
@@ -87,10 +87,8 @@ WorldFile load_world_unguarded(const std::string& file) {
       yaml::fail(xw.child("name"), node["name"], "use letters, digits, '_', '.' or '-' (it names a file)");
     }
     if (!names.insert(ex.name).second) yaml::fail(xw.child("name"), node["name"], "duplicate name");
-    if (node["group"]) {
-      ex.group = yaml::to_string(xw.child("group"), node["group"]);
-      if (ex.group.empty()) yaml::fail(xw.child("group"), node["group"], "must not be empty");
-    }
+    ex.group = yaml::optional_text(xw, node, "group");
+    ex.kind = yaml::optional_text(xw, node, "kind");
     ex.runs = yaml::to_integer(xw.child("runs"), yaml::require(xw, node, "runs"), 2, kMaxWorldRuns);
     total_runs += ex.runs;
     if (total_runs > kMaxWorldRuns) {
@@ -185,7 +183,7 @@ SuiteDocument world_suite(const WorldFile& w) {
   doc.robot = w.robot;
   doc.measurement_noise = w.measurement_noise;
   for (const WorldExperiment& ex : w.experiments) {
-    doc.experiments.push_back({ex.name, ex.path_yaml, ex.name + ".csv", {}, ex.group});
+    doc.experiments.push_back({ex.name, ex.path_yaml, ex.name + ".csv", {}, ex.group, ex.kind});
   }
   return doc;
 }

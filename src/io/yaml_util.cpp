@@ -172,4 +172,13 @@ std::optional<double> optional_number(const Where& parent_where, const YAML::Nod
   return to_number(parent_where.child(key), node);
 }
 
+std::string optional_text(const Where& parent_where, const YAML::Node& parent, const char* key,
+                          const std::string& fallback) {
+  const YAML::Node node = parent[key];
+  if (!node) return fallback;
+  std::string text = to_string(parent_where.child(key), node);
+  if (text.empty()) fail(parent_where.child(key), node, "must not be empty");
+  return text;
+}
+
 }  // namespace odomcov::yaml

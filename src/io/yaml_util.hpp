@@ -67,5 +67,8 @@ std::string to_string(const Where& where, const YAML::Node& node);
 double require_number(const Where& parent_where, const YAML::Node& parent, const char* key);
 std::optional<double> optional_number(const Where& parent_where, const YAML::Node& parent,
                                       const char* key);
+/// `parent[key]` as non-empty text (an experiment's group or kind), or `fallback` when absent.
+std::string optional_text(const Where& parent_where, const YAML::Node& parent, const char* key,
+                          const std::string& fallback = "");
 
 }  // namespace odomcov::yaml

@@ -25,6 +25,7 @@ struct Handle : FitCoordinate {
   const RobotParameter* robot = nullptr;  // a robot parameter, else an effect's:
   std::string effect;
   std::size_t index = 0;  // parameter index within the effect
+  double neutral_u = std::numeric_limits<double>::quiet_NaN();  // the "no effect" value's u
 
   double fd_step(double v) const { return std::max(fd_abs, fd_rel * std::abs(v - fd_origin)); }
   double& ref(SuiteModel& m) const {
@@ -86,6 +87,7 @@ Handle make_handle(const std::string& name, const SuiteModel& model) {
     if (info->parameters[i].name == param) index = i;
   }
   static_cast<FitCoordinate&>(h) = fit_coordinate(info->parameters[index]);
+  h.neutral_u = h.to_u(info->parameters[index].neutral);
   h.name = name;
   h.effect = effect;
   h.index = index;
@@ -100,11 +102,6 @@ void apply(SuiteModel& model, const std::vector<Handle>& handles, const double* 
 using Residuals = std::vector<std::vector<RunResidual>>;
 /// Each run's term of the log-likelihood at the coordinates u.
 using Terms = std::function<std::vector<double>(const std::vector<double>& u)>;
-
-double likelihood_of(const Suite& suite, const SuiteModel& model, Likelihood kind) {
-  const auto res = residuals(suite, model);
-  return kind == Likelihood::full ? log_likelihood(res) : scatter_log_likelihood(res);
-}
 
 /// -log L from the runs' terms; 1e300 where it is not finite (a wall for the optimiser).
 double negative_sum(const std::vector<double>& terms) {
@@ -128,8 +125,12 @@ Box box_of(const std::vector<Handle>& handles) {
 }
 
 /// Minimises -log L over u in the box from u (updated in place) with NLopt: BOBYQA, or the
-/// subplex method for one coordinate (BOBYQA needs two or more). Returns -log L at u.
-double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int* evaluations) {
+/// subplex method for one coordinate (BOBYQA needs two or more), until a step changes -log L by
+/// less than `ftol_abs`. Returns -log L at u (with no coordinate, NLopt has nothing to do:
+/// -log L there).
+double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int* evaluations,
+                double ftol_abs = 1e-9) {
+  if (u.empty()) return negative_sum(terms(u));
   struct Context {
     const Terms* terms;
     int* evaluations;
@@ -139,7 +140,7 @@ double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int*
   opt.set_upper_bounds(box.upper);
   opt.set_initial_step(box.step);
   opt.set_xtol_rel(1e-10);
-  opt.set_ftol_abs(1e-9);
+  opt.set_ftol_abs(ftol_abs);
   opt.set_maxeval(20000);
   opt.set_min_objective(
       [](const std::vector<double>& x, std::vector<double>&, void* data) {
@@ -229,6 +230,13 @@ Information information(const Terms& terms, const std::vector<double>& u, double
   return info;
 }
 
+/// True when coordinate u of `h` lies within `within` of a bound of its box that is not the
+/// parameter's neutral value (a size at 0 is no effect, not a fit pushed to an edge).
+bool at_far_bound(const Handle& h, double u, double within) {
+  auto neutral = [&](double bound) { return std::abs(bound - h.neutral_u) <= 1e-12 * std::max(1.0, std::abs(bound)); };
+  return (u - h.lower_u < within && !neutral(h.lower_u)) || (h.upper_u - u < within && !neutral(h.upper_u));
+}
+
 /// The estimates, their (robust) standard errors and covariance at u from the information.
 void fill_estimates(FitResult& out, const std::vector<Handle>& handles, const std::vector<double>& u,
                     const Box& box, const Information& info) {
@@ -248,6 +256,9 @@ void fill_estimates(FitResult& out, const std::vector<Handle>& handles, const st
     out.warnings.push_back(
         "the information matrix is singular: the data cannot tell these parameters apart "
         "(e.g. a rate and a size that act only through rate x size^2); no standard errors");
+    for (std::size_t i = 0; i < n; ++i) {
+      if (at_far_bound(handles[i], u[i], 1e-6 * box.step[i])) out.at_bound.push_back(out.names[i]);
+    }
     return;
   }
   const Eigen::MatrixXd cov_u = llt.solve(Eigen::MatrixXd::Identity(N, N));
@@ -257,6 +268,7 @@ void fill_estimates(FitResult& out, const std::vector<Handle>& handles, const st
     const auto k = static_cast<Eigen::Index>(i);
     const double se_u = std::sqrt(cov_u(k, k));
     const bool at_bound = (u[i] - box.lower[i] < 0.5 * se_u) || (box.upper[i] - u[i] < 0.5 * se_u);
+    if (at_far_bound(handles[i], u[i], 0.5 * se_u)) out.at_bound.push_back(out.names[i]);
     if (at_bound) {
       out.warnings.push_back(out.names[i] + " is at its bound (" + format_number(out.values(k)) +
                              "): the data do not determine it; no standard error");
@@ -296,12 +308,15 @@ std::vector<double> start_coordinates(SuiteModel& model, const std::vector<Handl
   return u;
 }
 
-FitResult fit_exact(const Suite& suite, SuiteModel model, const std::vector<Handle>& handles,
+/// Residuals of a model, computed for the fit: the whole suite's, or a cache view's.
+using Evaluate = std::function<Residuals(const SuiteModel&)>;
+
+FitResult fit_exact(const Evaluate& evaluate, SuiteModel model, const std::vector<Handle>& handles,
                     Likelihood kind, std::atomic<std::int64_t>* counter, FitResult out) {
   const Terms terms = [&](const std::vector<double>& u) {
     if (counter) ++*counter;
     apply(model, handles, u.data());
-    return run_log_likelihoods(residuals(suite, model), kind == Likelihood::scatter);
+    return run_log_likelihoods(evaluate(model), kind == Likelihood::scatter);
   };
   const Box box = box_of(handles);
   std::vector<double> u = start_coordinates(model, handles);
@@ -512,18 +527,24 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
   apply(model, handles, u.data());
   Surrogate s = anchor_at(model, handles, values(u), cache, counter);
   Terms surrogate = [&](const std::vector<double>& x) { return s.terms(values(x), kind); };
+  out.verified = false;
   for (out.anchors = 1; out.anchors <= kMaxAnchors; ++out.anchors) {
     std::vector<double> p = u;
     const double predicted = -minimise(surrogate, p, box, nullptr);
-    if (!(predicted - ll > kFitTolerance)) break;  // the anchor is the surrogate's optimum
+    if (!(predicted - ll > kFitTolerance)) {  // the anchor is the surrogate's optimum
+      out.verified = true;
+      break;
+    }
     double ll_p = exact(p);
-    for (int half = 0; half < kMaxHalvings && !(ll_p > ll); ++half) {
+    int halvings = 0;
+    for (; halvings < kMaxHalvings && !(ll_p > ll); ++halvings) {
       for (std::size_t k = 0; k < p.size(); ++k) p[k] = 0.5 * (p[k] + u[k]);
       ll_p = exact(p);
     }
     if (!(ll_p > ll)) break;  // no step improves: the anchor stands
     const double gain = ll_p - ll;
     const bool matched = std::abs(ll_p - predicted) < kFitTolerance;  // full step, as foreseen
+    out.verified = matched && halvings == 0;
     u = p;
     ll = ll_p;
     // The exact log-likelihood stopped improving, or the surrogate foresaw the exact one at its
@@ -542,8 +563,9 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
   return out;
 }
 
-/// The cache key of a model: its numbers, bit for bit, with inert effects (all values neutral)
-/// left out.
+/// The cache key of a model: its numbers, bit for bit, with inert catalogue effects (all values
+/// neutral) left out. A custom effect is never left out: its "neutral" values are the start
+/// its author gave (EffectInfo of a custom effect), which need not do nothing.
 std::string model_key(const SuiteModel& m) {
   std::string key;
   auto put = [&key](double x) { key.append(reinterpret_cast<const char*>(&x), sizeof x); };
@@ -554,7 +576,7 @@ std::string model_key(const SuiteModel& m) {
   put(m.order);
   for (const EffectSpec& e : m.effects) {
     const EffectInfo* info = info_of(e);
-    bool inert = info && info->parameters.size() == e.values.size();
+    bool inert = info && !e.custom && info->parameters.size() == e.values.size();
     for (std::size_t i = 0; inert && i < e.values.size(); ++i) inert = e.values[i] == info->parameters[i].neutral;
     if (inert) continue;
     key += e.name;
@@ -572,14 +594,70 @@ std::string model_key(const SuiteModel& m) {
 
 }  // namespace
 
+/// What a cache and its views share: the suite and every model's residuals, each propagated
+/// once.
+struct ResidualCache::Store {
+  const Suite* suite;
+  std::map<std::string, Residuals> by_model;
+  std::int64_t computed = 0;
+};
+
+ResidualCache::ResidualCache(const Suite& suite) : store_(std::make_shared<Store>(Store{&suite, {}, 0})) {}
+
+ResidualCache::ResidualCache(ResidualCache& parent, std::vector<bool> keep)
+    : store_(parent.store_), keep_(std::move(keep)) {
+  if (keep_.size() != store_->suite->experiments.size()) {
+    throw std::invalid_argument("ResidualCache: one flag per experiment of the suite");
+  }
+}
+
+const Suite& ResidualCache::suite() const { return *store_->suite; }
+
+std::int64_t ResidualCache::computed() const { return store_->computed; }
+
+std::vector<std::vector<RunResidual>> ResidualCache::evaluate(const SuiteModel& model) {
+  ++store_->computed;
+  Residuals all = residuals(*store_->suite, model);
+  return keep_.empty() ? all : select_experiments(all, keep_);
+}
+
+const std::vector<std::vector<RunResidual>>& ResidualCache::full(const SuiteModel& model,
+                                                                 std::atomic<std::int64_t>* counter) {
+  const std::string key = model_key(model);
+  auto it = store_->by_model.find(key);
+  if (it != store_->by_model.end()) return it->second;
+  if (counter) ++*counter;
+  ++store_->computed;
+  return store_->by_model.emplace(key, residuals(*store_->suite, model)).first->second;
+}
+
 const std::vector<std::vector<RunResidual>>& ResidualCache::at(const SuiteModel& model,
                                                                std::atomic<std::int64_t>* counter) {
+  if (keep_.empty()) return full(model, counter);
   const std::string key = model_key(model);
-  auto it = by_model_.find(key);
-  if (it != by_model_.end()) return it->second;
-  if (counter) ++*counter;
-  ++computed_;
-  return by_model_.emplace(key, residuals(*suite_, model)).first->second;
+  auto it = subsets_.find(key);
+  if (it != subsets_.end()) return it->second;
+  return subsets_.emplace(key, select_experiments(full(model, counter), keep_)).first->second;
+}
+
+std::vector<std::vector<RunResidual>> select_experiments(
+    const std::vector<std::vector<RunResidual>>& residuals, const std::vector<bool>& keep) {
+  std::vector<std::vector<RunResidual>> out;
+  for (std::size_t e = 0; e < residuals.size() && e < keep.size(); ++e) {
+    if (keep[e]) out.push_back(residuals[e]);
+  }
+  return out;
+}
+
+double& fitted_parameter(SuiteModel& model, const std::string& name) {
+  if (const RobotParameter* p = find_robot_parameter(name)) return p->ref(model.robot);
+  const std::size_t dot = name.find('.');
+  EffectSpec* spec = dot == std::string::npos ? nullptr : find_spec(model.effects, name.substr(0, dot));
+  const EffectInfo* info = spec ? info_of(*spec) : nullptr;
+  for (std::size_t i = 0; info && i < info->parameters.size() && i < spec->values.size(); ++i) {
+    if (info->parameters[i].name == name.substr(dot + 1)) return spec->values[i];
+  }
+  throw std::invalid_argument("fitted_parameter: the model has no " + name);
 }
 
 std::string check_fit_parameter(const std::string& name, const EffectList& context) {
@@ -608,14 +686,63 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
   std::vector<Handle> handles;
   for (const std::string& name : names) handles.push_back(make_handle(name, model));
   if (path == FitPath::exact) {
-    out.log_likelihood_before = likelihood_of(suite, start, likelihood);
-    return fit_exact(suite, model, handles, likelihood, evaluations, std::move(out));
+    // A cache view (a fold's training runs) is fitted on its own experiments.
+    const Evaluate evaluate = [&](const SuiteModel& m) { return cache ? cache->evaluate(m) : residuals(suite, m); };
+    const Residuals before = evaluate(start);
+    out.log_likelihood_before = likelihood == Likelihood::full ? log_likelihood(before) : scatter_log_likelihood(before);
+    return fit_exact(evaluate, model, handles, likelihood, evaluations, std::move(out));
   }
   ResidualCache own(suite);
   ResidualCache& used = cache ? *cache : own;
   const Residuals& before = used.at(start, evaluations);
   out.log_likelihood_before = likelihood == Likelihood::full ? log_likelihood(before) : scatter_log_likelihood(before);
   return fit_fast(model, handles, likelihood, evaluations, used, std::move(out));
+}
+
+FitResult refit_exactly(const FitResult& fast, const std::vector<std::string>& own,
+                        Likelihood likelihood, std::atomic<std::int64_t>* evaluations,
+                        ResidualCache& cache) {
+  if (fast.verified) return fast;
+  const std::int64_t computed_before = cache.computed();
+  const bool scatter = likelihood == Likelihood::scatter;
+  SuiteModel model = fast.model;
+  std::vector<Handle> handles;
+  for (const std::string& name : own) handles.push_back(make_handle(name, model));
+  const Terms terms = [&](const std::vector<double>& u) {
+    if (evaluations) ++*evaluations;
+    apply(model, handles, u.data());
+    return run_log_likelihoods(cache.evaluate(model), scatter);
+  };
+  std::vector<double> u = start_coordinates(model, handles);
+  const double best = -minimise(terms, u, box_of(handles), nullptr, 0.1 * kFitTolerance);
+  apply(model, handles, u.data());
+  if (!(best > fast.log_likelihood_after + kFitTolerance)) {
+    FitResult out = fast;
+    out.verified = true;  // no exact step from its optimum gains: it stands
+    out.evaluations += static_cast<int>(cache.computed() - computed_before);
+    return out;
+  }
+  // A better optimum: every parameter again by the fast path from there (the others move with
+  // the new values; standard errors at the new optimum).
+  std::vector<Handle> all;
+  for (const std::string& name : fast.names) all.push_back(make_handle(name, model));
+  FitResult out;
+  out.names = fast.names;
+  out.log_likelihood_before = fast.log_likelihood_before;
+  out = fit_fast(model, all, likelihood, evaluations, cache, std::move(out));
+  out.evaluations = fast.evaluations + static_cast<int>(cache.computed() - computed_before);
+  return out;
+}
+
+FitResult refit_exactly_from_both(const FitResult& fast, const SuiteModel& start, const std::vector<std::string>& own,
+                                  Likelihood likelihood, std::atomic<std::int64_t>* evaluations, ResidualCache& cache) {
+  FitResult from_fast = refit_exactly(fast, own, likelihood, evaluations, cache);
+  FitResult at_start = fast;  // the same fit, moved to the start: any exact optimum beats it
+  at_start.model = start;
+  at_start.verified = false;
+  at_start.log_likelihood_after = -std::numeric_limits<double>::infinity();
+  FitResult from_start = refit_exactly(at_start, own, likelihood, evaluations, cache);
+  return from_start.log_likelihood_after > from_fast.log_likelihood_after + kFitTolerance ? from_start : from_fast;
 }
 
 namespace {

@@ -2,33 +2,25 @@
 
 #include <algorithm>
 #include <boost/math/distributions/chi_squared.hpp>
+#include <boost/math/distributions/normal.hpp>
 #include <cmath>
 #include <limits>
+#include <cstdio>
+#include <cstdlib>
 
 #include "odomcov/base/format.hpp"
+#include "odomcov/measurement/design.hpp"
 
 namespace odomcov {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 std::size_t run_count(const Suite& suite) {
   std::size_t n = 0;
   for (const SuiteExperiment& e : suite.experiments) n += e.runs.size();
   return n;
-}
-
-ModelSummary summarise(const Comparison& c) {
-  ModelSummary s;
-  s.log_likelihood = c.log_likelihood;
-  s.verdict = c.verdict.name();
-  double runs = 0;
-  for (const ExperimentComparison& e : c.experiments) {
-    s.nees_mean += e.nees_mean * static_cast<double>(e.n);
-    runs += static_cast<double>(e.n);
-  }
-  s.nees_mean /= runs;
-  return s;
 }
 
 std::vector<double> experiment_log_likelihoods(const std::vector<std::vector<RunResidual>>& res) {
@@ -61,38 +53,34 @@ FittedNames split_fitted_names(const EffectList& effects) {
 /// coordinate step: the systematic effects on the full likelihood (random ones held), then the
 /// random effects on the scatter part (systematic ones held). A random effect is thus never
 /// sized by a mean misfit, and a systematic one always sees the spread the random ones give.
-SuiteModel refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* progress,
-                 FitPath path, ResidualCache& cache) {
+/// Returns the model and the parameters the fits left at a bound.
+struct Refit {
+  SuiteModel model;
+  std::vector<std::string> at_bound;
+};
+Refit refit(const Suite& suite, const SuiteModel& model, DiagnoseProgress* progress,
+            FitPath path, ResidualCache& cache) {
   const FittedNames names = split_fitted_names(model.effects);
-  SuiteModel out = model;
+  Refit out{model, {}};
   std::atomic<std::int64_t>* counter = progress ? &progress->evaluations : nullptr;
-  if (!names.systematic.empty()) {
-    out = fit(suite, out, names.systematic, Likelihood::full, counter, path, &cache).model;
-  }
-  if (!names.random.empty()) {
-    out = fit(suite, out, names.random, Likelihood::scatter, counter, path, &cache).model;
+  for (const auto& [fitted, kind] : {std::pair{&names.systematic, Likelihood::full},
+                                     std::pair{&names.random, Likelihood::scatter}}) {
+    if (fitted->empty()) continue;
+    const FitResult f = fit(suite, out.model, *fitted, kind, counter, path, &cache);
+    out.model = f.model;
+    out.at_bound.insert(out.at_bound.end(), f.at_bound.begin(), f.at_bound.end());
   }
   if (progress) ++progress->fits_done;
   return out;
 }
 
-/// The value of a fitted parameter in a model: a robot parameter ("k_left") or an effect's
-/// ("wheelbase_error.Eb"); NaN when the model lacks it.
+/// The value of a fitted parameter in a model (fitted_parameter); NaN when the model lacks it.
 double fitted_value(SuiteModel& model, const std::string& name) {
-  const std::size_t dot = name.find('.');
-  if (dot == std::string::npos) {
-    for (const RobotParameter& p : robot_parameters()) {
-      if (p.name == name) return p.ref(model.robot);
-    }
+  try {
+    return fitted_parameter(model, name);
+  } catch (const std::invalid_argument&) {
     return kNaN;
   }
-  const EffectSpec* spec = find_spec(model.effects, name.substr(0, dot));
-  if (!spec) return kNaN;
-  const auto& ps = info_of(*spec)->parameters;
-  for (std::size_t i = 0; i < ps.size() && i < spec->values.size(); ++i) {
-    if (ps[i].name == name.substr(dot + 1)) return spec->values[i];
-  }
-  return kNaN;
 }
 
 /// True when a candidate is reported by its fitted names (a robot candidate, or a group
@@ -246,32 +234,19 @@ std::vector<CandidateType> round_candidates(const Suite& suite, const EffectList
   return types;
 }
 
-/// The signature rule for the pairs a Gaussian likelihood cannot separate
-/// (EffectInfo::confused_with): when both are significant, the one the tails speak against
-/// moves to just below the other (the rest of the order stands).
-void apply_tail_rule(std::vector<Candidate>& candidates, const std::vector<CandidateType>& types,
-                     bool heavy_tails) {
-  auto at = [&](const std::string& n) {
-    return std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) { return c.effect == n; });
-  };
-  for (const CandidateType& type : types) {
-    if (type.confused_with.empty()) continue;
-    auto self = at(type.name), other = at(type.confused_with);
-    if (self == candidates.end() || other == candidates.end() || !self->significant || !other->significant) continue;
-    auto heavy = type.heavy_tails ? self : other, gaussian = type.heavy_tails ? other : self;
-    const bool heavy_first = heavy < gaussian;
-    if (heavy_tails != heavy_first) {
-      auto loser = heavy_tails ? gaussian : heavy;
-      auto winner = heavy_tails ? heavy : gaussian;
-      std::rotate(loser, loser + 1, winner + 1);  // loser now sits right after the winner
-    }
-  }
-}
+/// Folds with the base's fits on them (its own effects of each kind refitted on each fold's
+/// training runs), computed once per round when first needed.
+struct FoldSet {
+  Folds folds;
+  std::optional<FoldFits> base_full, base_scatter;
+  std::size_t size() const { return folds.size(); }
+};
 
 /// What every candidate fit of a round shares: the suite and the fit settings, the model
-/// before the round (`before`: its comparison, whose kurtosis scales random candidates' tests)
-/// and the base every candidate must improve on, the model's own effects refitted, with their
-/// names by kind and the base's log-likelihoods (full, scatter part, per experiment).
+/// before the round (`before`, its comparison) and the base every candidate must improve on,
+/// the model's own effects refitted, with their names by kind and the base's log-likelihoods
+/// (full, scatter part, per experiment); the folds and, once computed, the base's held-out
+/// log-likelihood of each part.
 struct Round {
   const Suite& suite;
   const Comparison& before;
@@ -283,6 +258,15 @@ struct Round {
   SuiteModel base;
   double base_full = 0.0, base_scatter = 0.0;
   std::vector<double> base_by_experiment;
+  FoldSet folds;   // the suite's (make_folds)
+  FoldSet within;  // K folds over the experiments (experiment_folds), every kind in training
+  std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
+
+  std::atomic<std::int64_t>* counter() const { return progress ? &progress->evaluations : nullptr; }
+  /// Throws Cancelled when the caller asked to stop.
+  void check_cancel() const {
+    if (progress && progress->cancel.load()) throw Cancelled();
+  }
 };
 
 /// The round's base: each candidate refits the model's effects of its own kind with it
@@ -291,7 +275,7 @@ struct Round {
 Round start_round(const Suite& suite, const SuiteModel& model, const Comparison& before,
                   bool heavy_tails, DiagnoseProgress* progress, FitPath path, ResidualCache& cache) {
   Round round{suite, before, heavy_tails, progress, path, cache, split_fitted_names(model.effects),
-              refit(suite, model, progress, path, cache), 0.0, 0.0, {}};
+              refit(suite, model, progress, path, cache).model, 0.0, 0.0, {}, {}, {}, {}};
   const auto& base_residuals = cache.at(round.base);
   round.base_full = log_likelihood(base_residuals);
   round.base_scatter = scatter_log_likelihood(base_residuals);
@@ -299,18 +283,11 @@ Round start_round(const Suite& suite, const SuiteModel& model, const Comparison&
   return round;
 }
 
-/// The p-value of a fitted candidate's likelihood-ratio test on its part of the likelihood:
-/// chi^2 with its own parameters as degrees of freedom, halved on the boundary.
-double candidate_p_value(const Round& round, const CandidateType& type, const Candidate& c) {
-  double lr = 2.0 * c.delta_log_likelihood;
-  // Heavy tails widen the null distribution of a Gaussian variance LRT by the kurtosis factor
-  // (the scaled test of [Browne84]); the same factor compare uses.
-  const Comparison& before = round.before;
-  if (!c.systematic && round.heavy_tails && before.mardia_b2 > before.mardia_expected) {
-    lr /= before.mardia_b2 / before.mardia_expected;
-  }
-  lr = std::max(0.0, lr);
-  return lr == 0.0 ? 1.0 : (type.on_boundary ? 0.5 : 1.0) * chi2_sf(lr, c.dof);
+/// The p-value of a likelihood-ratio gain `delta` (in log-likelihood) with `dof` parameters:
+/// chi^2, halved on the boundary [Self87].
+double lrt_p_value(double delta, int dof, bool on_boundary) {
+  const double lr = std::max(0.0, 2.0 * delta);
+  return lr == 0.0 ? 1.0 : (on_boundary ? 0.5 : 1.0) * chi2_sf(lr, dof);
 }
 
 /// The (at most two) experiments where the candidate raised the full log-likelihood most over
@@ -330,82 +307,468 @@ std::vector<std::pair<std::string, double>> evidence_of(
   return evidence;
 }
 
-/// Fits one candidate on the base with the nuisance parameters of its kind and judges it:
-/// delta log-likelihood on its part of the likelihood, delta BIC, p-value, its reported
-/// parameters and where it showed most.
-Candidate fit_candidate(const Round& round, const CandidateType& type, double log_runs) {
+/// One candidate of the round: its kind, its fit (for the exact refit and the held-out
+/// folds) and what diagnose reports of it.
+struct Trial {
+  const CandidateType* type = nullptr;
+  std::vector<std::string> fitted;  // the nuisance of its kind, then its own
+  Likelihood kind = Likelihood::full;
+  SuiteModel start;
+  FitResult fit;
   Candidate c;
+};
+
+/// Fits one candidate on the base with the nuisance parameters of its kind (the fit path of
+/// the round: the fast path, unless diagnose --exact).
+Trial fit_trial(const Round& round, const CandidateType& type) {
+  Trial t;
+  t.type = &type;
+  t.fitted = type.systematic ? round.nuisance.systematic : round.nuisance.random;
+  t.fitted.insert(t.fitted.end(), type.fitted.begin(), type.fitted.end());
+  t.kind = type.systematic ? Likelihood::full : Likelihood::scatter;
+  t.start = round.base;
+  t.start.effects.insert(t.start.effects.end(), type.start.begin(), type.start.end());
+  t.fit = fit(round.suite, t.start, t.fitted, t.kind, round.counter(), round.path, &round.cache);
+  return t;
+}
+
+/// The base's residuals with the candidate's predicted means: what the candidate does to the
+/// mean alone, under the base's covariances and group columns.
+std::vector<std::vector<RunResidual>> with_means(const std::vector<std::vector<RunResidual>>& candidate,
+                                                 std::vector<std::vector<RunResidual>> base) {
+  for (std::size_t e = 0; e < base.size(); ++e) {
+    for (std::size_t r = 0; r < base[e].size(); ++r) base[e][r].mean = candidate[e][r].mean;
+  }
+  return base;
+}
+
+/// True for a candidate judged on what it does to the mean: systematic and not grouped
+/// (group_variation acts through the correlation of a group's runs).
+bool judged_on_mean(const Trial& t, const SuiteModel& model) {
+  if (!t.type->systematic) return false;
+  const EffectInfo* info = t.type->effect.empty() ? nullptr : find_effect(t.type->effect, model.effects);
+  return !(info && info->grouped);
+}
+
+/// The largest |correlation| of the estimates of a fit's own parameters (from index `first`
+/// on) with the parameters before them, the model's effects refitted beside them; 1 when an own
+/// parameter has no standard error while the others have (singular or at a bound).
+void confounding(const FitResult& fit, std::size_t first, Candidate& c) {
+  const Eigen::MatrixXd& cov = fit.covariance;
+  if (first > 0 && !cov.allFinite()) {  // a singular information: nothing separates them
+    c.confounded = 1.0;
+    c.confounded_with = "the model's effects (singular information)";
+    return;
+  }
+  for (std::size_t i = first; i < fit.names.size(); ++i) {
+    const auto a = static_cast<Eigen::Index>(i);
+    for (std::size_t j = 0; j < first; ++j) {
+      const auto b = static_cast<Eigen::Index>(j);
+      double r = std::abs(cov(a, b) / std::sqrt(cov(a, a) * cov(b, b)));
+      if (!std::isfinite(r)) r = std::isfinite(cov(b, b)) && !std::isfinite(cov(a, a)) ? 1.0 : 0.0;
+      if (r > c.confounded) {
+        c.confounded = r;
+        c.confounded_with = fit.names[j];
+      }
+    }
+  }
+}
+
+/// Judges a fitted candidate in-sample: delta log-likelihood on its part of the likelihood,
+/// delta BIC, p-value, the gain in the mean (systematic, not grouped), its reported parameters
+/// and where it showed most.
+void judge_in_sample(const Round& round, Trial& t, double log_runs) {
+  const CandidateType& type = *t.type;
+  const bool exact = t.c.exact;
+  t.c = Candidate{};
+  Candidate& c = t.c;
   c.effect = type.name;
   c.physics = type.physics;
   c.signature = type.signature;
   c.robot = type.robot;
   c.systematic = type.systematic;
-  std::vector<std::string> fitted = c.systematic ? round.nuisance.systematic : round.nuisance.random;
-  const std::vector<std::string>& own = type.fitted;
-  fitted.insert(fitted.end(), own.begin(), own.end());
-  const Likelihood kind = c.systematic ? Likelihood::full : Likelihood::scatter;
-  SuiteModel start = round.base;
-  start.effects.insert(start.effects.end(), type.start.begin(), type.start.end());
-  const FitResult f = fit(round.suite, start, fitted, kind,
-                          round.progress ? &round.progress->evaluations : nullptr, round.path, &round.cache);
+  c.exact = exact;
   // With heavy tails the observed information understates the uncertainty: sandwich SEs.
-  const Eigen::VectorXd& se = round.heavy_tails ? f.robust_stderrs : f.stderrs;
-  c.model = f.model;
-  c.dof = static_cast<int>(own.size());
+  const Eigen::VectorXd& se = round.heavy_tails ? t.fit.robust_stderrs : t.fit.stderrs;
+  c.model = t.fit.model;
+  c.at_bound = t.fit.at_bound;
+  c.dof = static_cast<int>(type.fitted.size());
   // Each candidate is judged on the part of the likelihood it explains: the full one for a
   // systematic effect, the scatter part for a random one (whose extra variance would
   // otherwise also "explain" any mean misfit). The gains are on one scale; delta BIC ranks.
-  c.delta_log_likelihood = f.log_likelihood_after - (c.systematic ? round.base_full : round.base_scatter);
+  c.delta_log_likelihood = t.fit.log_likelihood_after - (c.systematic ? round.base_full : round.base_scatter);
   c.delta_bic = -2.0 * c.delta_log_likelihood + c.dof * log_runs;
-  c.p_value = candidate_p_value(round, type, c);
-  describe_fit(round.suite, type, static_cast<Eigen::Index>(fitted.size() - own.size()), se, c);
+  c.p_value = lrt_p_value(c.delta_log_likelihood, c.dof, type.on_boundary);
+  describe_fit(round.suite, type, static_cast<Eigen::Index>(t.fitted.size() - type.fitted.size()), se, c);
   const auto& candidate_residuals = round.cache.at(c.model);
   c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - round.base_full;
   c.evidence = evidence_of(round, candidate_residuals);
-  return c;
+  if (judged_on_mean(t, c.model)) {
+    const auto& base = round.cache.at(round.base);
+    c.delta_mean_log_likelihood = log_likelihood(with_means(candidate_residuals, base)) - log_likelihood(base);
+    c.mean_p_value = lrt_p_value(c.delta_mean_log_likelihood, c.dof, type.on_boundary);
+  }
+  confounding(t.fit, t.fitted.size() - type.fitted.size(), c);
 }
 
-/// The decision rules: significance at alpha shared among the candidates (Bonferroni), then
-/// significant candidates first, each group by delta BIC, and the tail rule.
-void rank_candidates(Diagnosis& d, const std::vector<CandidateType>& types) {
-  const double per_candidate = d.alpha / static_cast<double>(std::max<std::size_t>(1, d.candidates.size()));
-  for (Candidate& c : d.candidates) c.significant = c.p_value < per_candidate;
-  std::stable_sort(d.candidates.begin(), d.candidates.end(), [&](const Candidate& a, const Candidate& b) {
-    return a.significant != b.significant ? a.significant : a.delta_bic < b.delta_bic;
+/// Significance at alpha shared among the candidates (Bonferroni), then significant
+/// candidates first, each group by delta BIC.
+void rank_trials(std::vector<Trial>& trials, double alpha) {
+  const double per_candidate = alpha / static_cast<double>(std::max<std::size_t>(1, trials.size()));
+  for (Trial& t : trials) {
+    t.c.significant = t.c.p_value < per_candidate;
+    t.c.verdict = t.c.significant ? "not judged" : "not significant";
+  }
+  std::stable_sort(trials.begin(), trials.end(), [&](const Trial& a, const Trial& b) {
+    return a.c.significant != b.c.significant ? a.c.significant : a.c.delta_bic < b.c.delta_bic;
   });
-  apply_tail_rule(d.candidates, types, d.heavy_tails);
+  
 }
 
-/// Adopts the best (significant) candidate: its model with everything refitted by its part of
-/// the likelihood, now that the new effect is in (the earlier effects were sized without it),
-/// and its reported values from that model.
-void adopt_best(Diagnosis& d, const std::vector<CandidateType>& types, const Round& round) {
-  d.best = 0;
-  Candidate& best = d.candidates.front();
+/// Simulated replicates per step of match_tails, and its steps at most.
+constexpr std::int64_t kTailReplicates = 49;
+constexpr int kTailSteps = 4;
+
+/// An adopted effect whose tails the Gaussian likelihood cannot see (EffectInfo::rescale_tails,
+/// bumps): its impulse size is set so that the model's own simulated world has the data's
+/// pooled Mardia kurtosis, a simulated method of moments. At a fixed variance the excess
+/// kurtosis grows as the square of the impulse size, so a few fixed-point steps settle it; the
+/// variance, and so every Gaussian likelihood, is unchanged. Returns a note for the report ("" when
+/// nothing was done: no such effect, no experiment of 10 runs, or no excess kurtosis in the
+/// data).
+std::string match_tails(const Suite& suite, SuiteModel& model, const std::string& effect,
+                        ResidualCache& cache, std::uint64_t seed) {
+  EffectSpec* spec = find_spec(model.effects, effect);
+  const TailRescale rescale = spec ? info_of(*spec)->rescale_tails : nullptr;
+  if (!rescale) return "";
+  const std::vector<std::vector<RunResidual>> res = cache.at(model);
+  CalibrationOptions gaussian;
+  gaussian.method = CalibrationMethod::gaussian;
+  const Comparison data = compare(suite, model, kDiagnoseAlpha, res, gaussian);
+  const double excess = data.mardia_b2 - data.mardia_expected;
+  if (!data.kurtosis.valid || !(excess > 0)) return "";
+  for (int step = 0; step < kTailSteps; ++step) {
+    const double model_excess = simulated_kurtosis(suite, model, res, kTailReplicates, seed) - data.mardia_expected;
+    if (!(model_excess > 0)) break;
+    const double factor = std::clamp(std::sqrt(excess / model_excess), 0.1, 10.0);
+    rescale(*spec, factor);
+    if (std::abs(factor - 1.0) < 0.02) break;
+  }
+  return "the impulse size then set so that the model's simulated world has the data's Mardia "
+         "kurtosis, " + format_number(data.mardia_b2, "%.3g") + " (simulated method of moments)";
+}
+
+/// The base's fits on each fold (its own effects of that kind refitted on each fold's
+/// training runs), computed once per round.
+const FoldFits& base_folds(const Round& round, FoldSet& set, Likelihood kind) {
+  std::optional<FoldFits>& slot = kind == Likelihood::full ? set.base_full : set.base_scatter;
+  if (!slot) {
+    const std::vector<std::string>& names = kind == Likelihood::full ? round.nuisance.systematic : round.nuisance.random;
+    slot = fit_folds(round.cache, set.folds, round.base, names, {}, kind, round.counter(), round.path);
+  }
+  return *slot;
+}
+
+/// The largest ratio of a fold fit's standard error of an own parameter to the in-sample one
+/// (infinite where the fold's fit has none and the in-sample fit has one; 1 where neither).
+double stderr_ratio(const std::vector<double>& fold, const std::vector<double>& in_sample) {
+  double most = 1.0;
+  for (std::size_t k = 0; k < fold.size() && k < in_sample.size(); ++k) {
+    if (!std::isfinite(in_sample[k]) || in_sample[k] <= 0) continue;
+    most = std::max(most, std::isfinite(fold[k]) ? fold[k] / in_sample[k] : std::numeric_limits<double>::infinity());
+  }
+  return most;
+}
+
+/// The candidate's own parameters' in-sample standard errors, in the order of its fitted names.
+std::vector<double> own_stderrs(const Trial& t) {
+  std::vector<double> out;
+  const std::size_t first = t.fitted.size() - t.type->fitted.size();
+  for (std::size_t k = first; k < t.fitted.size(); ++k) out.push_back(t.fit.stderrs(static_cast<Eigen::Index>(k)));
+  return out;
+}
+
+/// What a candidate is judged on, against the base: its part of the likelihood, and for a
+/// candidate judged on the mean, its means under the base's covariances.
+std::vector<std::vector<RunResidual>> judged(const std::vector<std::vector<RunResidual>>& candidate,
+                                             const std::vector<std::vector<RunResidual>>& base, bool on_mean) {
+  return on_mean ? with_means(candidate, base) : candidate;
+}
+
+/// The in-sample gain of the candidate over the base on each fold's runs (what it judges
+/// on): whether a fold has anything for it to predict.
+std::vector<double> fold_signal(const Round& round, const Folds& folds, const Trial& t, bool on_mean) {
+  const auto& base = round.cache.at(round.base);
+  const auto mine = judged(round.cache.at(t.c.model), base, on_mean);
+  const bool scatter = t.kind == Likelihood::scatter;
+  const std::vector<double> a = run_log_likelihoods(mine, scatter), b = run_log_likelihoods(base, scatter);
+  std::vector<double> out(folds.size(), 0.0);
+  std::size_t i = 0;
+  for (std::size_t e = 0; e < base.size(); ++e) {
+    for (std::size_t r = 0; r < base[e].size(); ++r, ++i) out[static_cast<std::size_t>(folds.of_experiment[e])] += a[i] - b[i];
+  }
+  return out;
+}
+
+/// The candidate cross-validated: per fold, its gain in held-out log-likelihood over the base
+/// (both fitted without the fold; a candidate judged on the mean by its means under the base's
+/// covariances), whether the fold can test it (its training runs determine the candidate,
+/// kMaxFoldStderrRatio, and the candidate changes the fold's prediction, kMinFoldSignal), and
+/// in all over the folds that can; NaN when none can.
+void cross_validate(const Round& round, FoldSet& set, Trial& t) {
+  const Folds& folds = set.folds;
+  if (round.progress) round.progress->fits_total += static_cast<std::int64_t>(folds.size());
+  const FoldFits& base = base_folds(round, set, t.kind);
+  const FoldFits mine = fit_folds(round.cache, folds, t.start, t.fitted, t.type->fitted, t.kind,
+                                  round.counter(), round.path);
+  if (round.progress) round.progress->fits_done += static_cast<std::int64_t>(folds.size());
+  const bool on_mean = judged_on_mean(t, t.c.model);
+  const std::vector<double> in_sample = own_stderrs(t);
+  const std::vector<double> signal = fold_signal(round, folds, t, on_mean);
+  t.c.held_out_by_fold.clear();
+  bool any = false;
+  double total = 0.0;
+  for (std::size_t f = 0; f < folds.size(); ++f) {
+    const std::vector<bool> training = folds.training(f);
+    const auto& b = round.cache.full(base.models[f], round.counter());
+    const auto& c = round.cache.full(mine.models[f], round.counter());
+    Candidate::FoldGain g{folds.names[f],
+                          held_out_log_likelihood(judged(c, b, on_mean), training, t.kind) -
+                              held_out_log_likelihood(b, training, t.kind),
+                          stderr_ratio(mine.own_stderrs[f], in_sample), signal[f], true};
+    g.counted = g.stderr_ratio <= kMaxFoldStderrRatio && std::abs(g.signal) >= kMinFoldSignal;
+    g.contradicts = !g.counted && std::abs(g.signal) >= kMinFoldSignal &&
+                    g.stderr_ratio <= kMaxContradictionStderrRatio &&
+                    g.gain < -contradiction_bound(g.stderr_ratio, t.c.dof);
+    if (g.counted) total += g.gain;
+    any = any || g.counted;
+    t.c.held_out_by_fold.push_back(g);
+  }
+  t.c.delta_held_out = any ? total : kNaN;
+}
+
+/// "a (-12.3) and b (+4.1)": the counted folds, worst first, at most `most`.
+std::string worst_folds(std::vector<Candidate::FoldGain> gains, std::size_t most) {
+  std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.gain < b.gain; });
+  std::string text;
+  for (const Candidate::FoldGain& g : gains) {
+    if (!g.counted || most == 0) continue;
+    text += (text.empty() ? "" : ", ") + g.fold + " (" + format_number(g.gain, "%+.3g") + ")";
+    --most;
+  }
+  return text;
+}
+
+/// Why a fold could not test the candidate, in words.
+std::string why_uncounted(const Candidate& c, const Candidate::FoldGain& g) {
+  if (g.contradicts) {
+    return "fitted without it, " + c.effect + " is not determined (" + format_number(g.stderr_ratio, "%.2g") +
+           " times the standard error), and it loses " + format_number(-g.gain, "%.3g") +
+           " there, more than that uncertainty explains: what the other runs fit is not what it wants";
+  }
+  if (g.stderr_ratio > kMaxFoldStderrRatio) {
+    return "without it " + c.effect + " is not determined: " +
+           (std::isfinite(g.stderr_ratio) ? format_number(g.stderr_ratio, "%.2g") + " times the standard error"
+                                          : std::string("no standard error"));
+  }
+  return "nothing to predict there: in-sample gain " + format_number(g.signal, "%+.2g");
+}
+
+/// The folds that could not test the candidate and those that contradict it, in words ("" for
+/// none).
+std::string uncounted_folds(const Candidate& c) {
+  std::string against, skipped;
+  for (const Candidate::FoldGain& g : c.held_out_by_fold) {
+    std::string& text = g.contradicts ? against : skipped;
+    if (!g.counted) text += (text.empty() ? "" : ", ") + g.fold + " (" + why_uncounted(c, g) + ")";
+  }
+  return (against.empty() ? "" : "; against it: " + against) + (skipped.empty() ? "" : "; not counted: " + skipped);
+}
+
+/// The mimic's verdict in words: what it imitates in-sample, and how it predicts held out.
+std::string mimic_text(const Trial& t, const Folds& folds) {
+  const Candidate& c = t.c;
+  std::string text = c.effect + " is a mimic: fitted on all the runs it gains " +
+                     format_number(c.delta_log_likelihood, "%.4g") + " in log-likelihood";
+  if (!c.evidence.empty()) text += ", most in " + c.evidence[0].first;
+  text += ", but fitted without each " + std::string(folds.by == "kind" ? "kind of path" : folds.by == "group" ? "group" : "fold") +
+          " in turn it predicts " + (c.delta_held_out <= 0 ? "the held-out runs" : "some of them") +
+          " worse than the model without it (in all " + format_number(c.delta_held_out, "%+.4g") + "; worst: " +
+          worst_folds(c.held_out_by_fold, 2) +
+          uncounted_folds(c) + "). It imitates part of the misfit (" + c.signature +
+          ") in the runs it is fitted on, but it is not what predicts the others: something else is missing.";
+  return text;
+}
+
+/// The candidate's model with everything refitted by its part of the likelihood, now that the
+/// new effect is in (the earlier effects were sized without it), and its reported values from
+/// that model. Returns the parameters that refit left at a bound.
+std::vector<std::string> adoption_refit(const Round& round, Trial& t) {
+  Candidate& c = t.c;
+  const CandidateType& type = *t.type;
   // (When every effect is of the candidate's kind and nothing was completed after its fit,
   // the candidate's own fit was already that refit: all of them jointly on its likelihood.)
-  const CandidateType& type = *std::find_if(
-      types.begin(), types.end(), [&](const CandidateType& t) { return t.name == best.effect; });
   bool other_kind = type.complete != nullptr;
-  for (const EffectSpec& e : best.model.effects) {
-    other_kind = other_kind || info_of(e)->systematic != best.systematic;
+  for (const EffectSpec& e : c.model.effects) other_kind = other_kind || info_of(e)->systematic != c.systematic;
+  std::vector<std::string> at_bound;
+  if (other_kind) {
+    Refit r = refit(round.suite, c.model, round.progress, round.path, round.cache);
+    c.model = std::move(r.model);
+    at_bound = std::move(r.at_bound);
   }
-  if (other_kind) best.model = refit(round.suite, best.model, round.progress, round.path, round.cache);
+  const std::string note = match_tails(round.suite, c.model, type.effect, round.cache, round.seed);
+  if (!note.empty()) c.note += (c.note.empty() ? "" : "; ") + note;
+  if (!other_kind && note.empty()) return {};
   if (reported_by_names(type)) {
-    for (std::size_t i = 0; i < type.fitted.size(); ++i) {
-      best.values[i] = fitted_value(best.model, type.fitted[i]);
-    }
+    for (std::size_t i = 0; i < type.fitted.size(); ++i) c.values[i] = fitted_value(c.model, type.fitted[i]);
   } else {
-    // completed ones stay, fitted ones refitted
-    best.values = find_spec(best.model.effects, type.effect)->values;
+    c.values = find_spec(c.model.effects, type.effect)->values;  // completed ones stay
   }
+  return at_bound;
+}
+
+/// Stops a candidate by `rule` with the words of `decision`.
+bool stop(Candidate& c, const std::string& verdict, const std::string& rule, const std::string& decision) {
+  c.verdict = verdict;
+  c.rule = rule;
+  c.decision = decision;
+  return false;
+}
+
+std::string joined(const std::vector<std::string>& list) {
+  std::string text;
+  for (const std::string& s : list) text += (text.empty() ? "" : ", ") + s;
+  return text;
+}
+
+/// The rules every adoption must pass, in order; true when the candidate is adopted.
+///  1. no fitted parameter at a bound of its range (not its neutral value);
+///  2. a systematic candidate gains in the mean, not only by inflating the covariance: the
+///     gain of its means under the base's covariances is significant at the per-candidate level;
+///  3. it predicts the held-out folds better than the base (else it is a mimic);
+///  4. its adopted model (everything refitted) has no parameter at a bound and does not move
+///     the NEES mean away from 3 (moves_nees_away).
+bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& before, std::size_t runs) {
+  Candidate& c = t.c;
+  if (!c.at_bound.empty()) {
+    return stop(c, "stopped", "parameter at bound",
+                "not adopted: its fit ends at the edge of the allowed range (" + joined(c.at_bound) +
+                    "), so the data push it beyond any plausible size");
+  }
+  if (c.confounded > kConfoundedCorrelation) {
+    return stop(c, "stopped", "confounded",
+                "not adopted: the experiments do not separate it from " + c.confounded_with + " (correlation " +
+                    format_number(c.confounded, "%.3f") +
+                    "): the runs fix only a combination of the two; record an experiment that moves one of them "
+                    "alone (next_experiments)");
+  }
+  if (std::isfinite(c.mean_p_value) && !(c.mean_p_value < per_candidate)) {
+    return stop(c, "stopped", "covariance, not mean",
+                "not adopted: a systematic effect, but its predicted means gain only " +
+                    format_number(c.delta_mean_log_likelihood, "%.3g") + " (p = " +
+                    format_number(c.mean_p_value, "%.2g") +
+                    "); its gain comes from the covariance it inflates, not from the mean it should explain");
+  }
+  if (round.folds.size() >= 2) {
+    round.check_cancel();
+    const Folds* used = &round.folds.folds;
+    cross_validate(round, round.folds, t);
+    if (!std::isfinite(c.delta_held_out) && round.within.size() >= 2) {
+      // No kind of path can test it (an effect that one kind alone shows): held-out experiments
+      // of each kind instead, with every kind in the training runs.
+      used = &round.within.folds;
+      cross_validate(round, round.within, t);
+    }
+    const bool loses_a_fold = std::any_of(c.held_out_by_fold.begin(), c.held_out_by_fold.end(), [](const Candidate::FoldGain& g) {
+      return (g.counted && g.gain < -kMaxFoldLoss) || g.contradicts;
+    });
+    if (c.delta_held_out <= 0 || loses_a_fold) return stop(c, "mimic", "held-out likelihood", mimic_text(t, *used));
+  }
+  const std::vector<std::string> bounds = adoption_refit(round, t);
+  if (!bounds.empty()) {
+    return stop(c, "stopped", "parameter at bound",
+                "not adopted: with every effect refitted, " + joined(bounds) + " ends at the edge of its range");
+  }
+  // Only the NEES mean is read: the Gaussian reference (no referee replicates) is enough.
+  CalibrationOptions gaussian;
+  gaussian.method = CalibrationMethod::gaussian;
+  const ModelSummary after =
+      summarise(compare(round.suite, c.model, round.before.alpha, round.cache.at(c.model), gaussian));
+  if (moves_nees_away(before, after, runs)) {
+    return stop(c, "stopped", "NEES",
+                "not adopted: it moves the NEES mean from " + format_number(before.nees_mean, "%.3g") + " to " +
+                    format_number(after.nees_mean, "%.3g") + ", further from 3");
+  }
+  c.verdict = "adopted";
+  c.decision = std::isfinite(c.delta_held_out)
+                   ? "adopted: it predicts the held-out folds better (" + format_number(c.delta_held_out, "%+.4g") +
+                         uncounted_folds(c) + ")"
+                   : "adopted on the in-sample evidence: " +
+                         std::string(round.folds.size() >= 2 ? "no fold can test it" + uncounted_folds(c)
+                                                             : "no cross-validation (one experiment)");
+  return true;
+}
+
+/// Vuong's statistic for two non-nested fitted candidates on their part of the likelihood
+/// [Vuong89]: z = sum d_i / (sqrt(n) sd(d)), d_i the runs' log-likelihood differences (Welford
+/// for the variance). Near 0 when the likelihood cannot tell the two apart.
+double vuong_z(const Round& round, const Trial& a, const Trial& b) {
+  const bool scatter = a.kind == Likelihood::scatter;
+  const std::vector<double> la = run_log_likelihoods(round.cache.at(a.c.model), scatter);
+  const std::vector<double> lb = run_log_likelihoods(round.cache.at(b.c.model), scatter);
+  double mean = 0.0, m2 = 0.0;
+  for (std::size_t i = 0; i < la.size(); ++i) {
+    const double d = la[i] - lb[i], delta = d - mean;
+    mean += delta / static_cast<double>(i + 1);
+    m2 += delta * (d - mean);
+  }
+  const double n = static_cast<double>(la.size());
+  const double sd = n > 1 ? std::sqrt(m2 / (n - 1)) : 0.0;
+  return sd > 0 ? mean * std::sqrt(n) / sd : (mean == 0.0 ? 0.0 : std::copysign(kInfinity, mean));
+}
+
+bool consistent_model(const Round& round, const SuiteModel& model, const CalibrationOptions& calibration) {
+  return compare(round.suite, model, round.before.alpha, round.cache.at(model), calibration).verdict.consistent();
+}
+
+/// The consistency rule. The likelihood that ranks the candidates is Gaussian and blind to the
+/// shape of the errors (a wheel noise level and bumps add the same variance per metre). When
+/// the adopted candidate leaves the model inconsistent by compare (with its referee, which sees
+/// the shape), each later significant candidate of the same part that the likelihood cannot
+/// tell from it (|Vuong z| below the two-sided alpha point) and that passes every rule is
+/// tried, and the first whose model compare finds consistent is adopted instead. Returns the
+/// adopted trial's index.
+std::size_t prefer_consistent_rival(Round& round, std::vector<Trial>& trials, std::size_t best, double per_candidate,
+                                    const ModelSummary& before, std::size_t runs, const CalibrationOptions& calibration) {
+  if (consistent_model(round, trials[best].c.model, calibration)) return best;
+  const double z_alpha = boost::math::quantile(boost::math::complement(boost::math::normal(), 0.5 * round.before.alpha));
+  for (std::size_t j = best + 1; j < trials.size() && trials[j].c.significant; ++j) {
+    if (trials[j].c.systematic != trials[best].c.systematic) continue;
+    const double z = vuong_z(round, trials[best], trials[j]);
+    if (!(std::abs(z) < z_alpha)) continue;
+    round.check_cancel();
+    if (!judge(round, trials[j], per_candidate, before, runs)) continue;
+    const std::string tie = " the likelihood cannot tell " + trials[best].c.effect + " from " + trials[j].c.effect +
+                            " (Vuong z = " + format_number(z, "%.2f") + ")";
+    if (!consistent_model(round, trials[j].c.model, calibration)) {
+      stop(trials[j].c, "not judged", "", "passes every rule, but" + tie + " and neither leaves the model consistent");
+      continue;
+    }
+    stop(trials[best].c, "stopped", "consistency",
+         "not adopted:" + tie + ", and with it compare finds the model inconsistent, with " + trials[j].c.effect +
+             " consistent (the shape of the errors decides)");
+    trials[j].c.decision += ";" + tie + ", and only with it compare finds the model consistent";
+    return j;
+  }
+  return best;
 }
 
 /// The outcome: the final model (the best candidate's, else the suite's) compared again, its
 /// corrected odometry and, when it still misfits, what the misfit lines up with.
-void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, ResidualCache& cache) {
+void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, ResidualCache& cache,
+                     const CalibrationOptions& calibration) {
   d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, d.alpha,
-                                       cache.at(d.candidates[*d.best].model)))
+                                       cache.at(d.candidates[*d.best].model), calibration))
                    : d.before;
   d.explained = d.after.verdict == "consistent";
   d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
@@ -415,40 +778,111 @@ void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, 
   }
 }
 
+/// Every candidate fitted and judged in-sample, ranked: the fast path screens; then every fit
+/// it could not verify (FitResult::verified) of a significant candidate, and of a user's
+/// candidate (whose expressions may be arbitrarily nonlinear), is refitted exactly
+/// (refit_exactly) and judged again, and the candidates are ranked again. (The catalogue's
+/// candidates agree with the exact path where the fast one is verified: fast_path_test.)
+std::vector<Trial> fit_trials(Round& round, const std::vector<CandidateType>& types, std::size_t runs, double alpha) {
+  const double log_runs = std::log(static_cast<double>(runs));
+  std::vector<Trial> trials;
+  for (const CandidateType& type : types) {
+    round.check_cancel();
+    trials.push_back(fit_trial(round, type));
+    judge_in_sample(round, trials.back(), log_runs);
+    if (round.progress) ++round.progress->fits_done;
+  }
+  rank_trials(trials, alpha);
+  bool refitted = false;
+  for (Trial& t : trials) {
+    if (t.fit.verified || !(t.c.significant || !t.type->start.empty())) continue;
+    round.check_cancel();
+    // A user's candidate (arbitrarily nonlinear) is refitted exactly from its given values too.
+    t.fit = t.type->start.empty()
+                ? refit_exactly(t.fit, t.type->fitted, t.kind, round.counter(), round.cache)
+                : refit_exactly_from_both(t.fit, t.start, t.type->fitted, t.kind, round.counter(), round.cache);
+    t.c.exact = true;
+    judge_in_sample(round, t, log_runs);
+    refitted = true;
+  }
+  if (refitted) rank_trials(trials, alpha);
+  return trials;
+}
+
 }  // namespace
+
+double contradiction_bound(double stderr_ratio, int dof) {
+  const boost::math::chi_squared chi2(std::max(1, dof));
+  return kMaxFoldLoss + 0.5 * stderr_ratio * stderr_ratio *
+                            boost::math::quantile(boost::math::complement(chi2, kContradictionAlpha));
+}
+
+bool moves_nees_away(const ModelSummary& before, const ModelSummary& after, std::size_t runs) {
+  const double tolerance = 2.0 * std::sqrt(6.0 / static_cast<double>(std::max<std::size_t>(runs, 1)));
+  return std::abs(after.nees_mean - 3.0) > std::abs(before.nees_mean - 3.0) + tolerance;
+}
+
+ModelSummary summarise(const Comparison& c) {
+  ModelSummary s;
+  s.log_likelihood = c.log_likelihood;
+  s.verdict = c.verdict.name();
+  s.calibration = c.calibration;
+  double runs = 0;
+  for (const ExperimentComparison& e : c.experiments) {
+    s.nees_mean += e.nees_mean * static_cast<double>(e.n);
+    runs += static_cast<double>(e.n);
+  }
+  s.nees_mean /= runs;
+  return s;
+}
+
+Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOptions& options,
+                   DiagnoseProgress* progress) {
+  // Every exact propagation of the round, kept: the fast path's anchors and difference points
+  // around the base model are shared by all candidates, and by their fits on the folds.
+  ResidualCache cache(suite);
+  Diagnosis d;
+  d.alpha = options.alpha;
+  d.runs = run_count(suite);
+  if (options.cross_validate) d.folds = make_folds(suite);
+  const Comparison before = compare(suite, model, options.alpha, cache.at(model), options.calibration);
+  d.before = summarise(before);
+  d.kurtosis = before.kurtosis;
+  d.heavy_tails = d.kurtosis.valid && d.kurtosis.statistic > 0 && d.kurtosis.p_value < options.alpha;
+
+  // The model's own effects, refitted: the reference every candidate must improve on.
+  Round round = start_round(suite, model, before, d.heavy_tails, progress, options.path, cache);
+  round.folds.folds = d.folds;
+  if (options.cross_validate && d.folds.by != "experiments") round.within.folds = experiment_folds(suite);
+  round.seed = options.calibration.seed;
+  const std::vector<CandidateType> types =
+      round_candidates(suite, model.effects, options.only, options.candidates, options.path == FitPath::fast);
+
+  // The fits: the base refit, one per candidate and the winner's refit (and, as they come, the
+  // finalists' folds).
+  if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
+  std::vector<Trial> trials = fit_trials(round, types, d.runs, options.alpha);
+  const double per_candidate = options.alpha / static_cast<double>(std::max<std::size_t>(1, trials.size()));
+  for (std::size_t i = 0; i < trials.size() && trials[i].c.significant && !d.best; ++i) {
+    if (judge(round, trials[i], per_candidate, d.before, d.runs)) d.best = i;
+  }
+  if (d.best) d.best = prefer_consistent_rival(round, trials, *d.best, per_candidate, d.before, d.runs, options.calibration);
+  for (Trial& t : trials) d.candidates.push_back(std::move(t.c));
+  if (progress) progress->fits_done = progress->fits_total.load();
+  explain_outcome(d, suite, model, cache, options.calibration);
+  return d;
+}
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha,
                    const std::vector<std::string>& only, DiagnoseProgress* progress,
-                   const EffectList& candidates, FitPath path) {
-  // Every exact propagation of the round, kept: the fast path's anchors and difference points
-  // around the base model are shared by all candidates.
-  ResidualCache cache(suite);
-  Diagnosis d;
-  d.alpha = alpha;
-  d.runs = run_count(suite);
-  const Comparison before = compare(suite, model, alpha, cache.at(model));
-  d.before = summarise(before);
-  d.kurtosis = before.kurtosis;
-  d.heavy_tails = d.kurtosis.valid && d.kurtosis.statistic > 0 && d.kurtosis.p_value < alpha;
-
-  // The model's own effects, refitted: the reference every candidate must improve on.
-  const Round round = start_round(suite, model, before, d.heavy_tails, progress, path, cache);
-  const std::vector<CandidateType> types =
-      round_candidates(suite, model.effects, only, candidates, path == FitPath::fast);
-
-  // The fits: the base refit, one per candidate and the winner's refit.
-  if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
-  const double log_runs = std::log(static_cast<double>(d.runs));
-  for (const CandidateType& type : types) {
-    d.candidates.push_back(fit_candidate(round, type, log_runs));
-    if (progress) ++progress->fits_done;
-  }
-
-  rank_candidates(d, types);
-  if (!d.candidates.empty() && d.candidates.front().significant) adopt_best(d, types, round);
-  if (progress) progress->fits_done = progress->fits_total.load();
-  explain_outcome(d, suite, model, cache);
-  return d;
+                   const EffectList& candidates, FitPath path, const CalibrationOptions& calibration) {
+  DiagnoseOptions options;
+  options.alpha = alpha;
+  options.only = only;
+  options.candidates = candidates;
+  options.path = path;
+  options.calibration = calibration;
+  return diagnose(suite, model, options, progress);
 }
 
 std::string explain(const Candidate& c) {
@@ -489,12 +923,14 @@ std::string verdict_text(const Diagnosis& d) {
     if (!a.testable || shown == 3) break;
     if (shown == 0) {
       text += a.p_value < d.alpha
-                  ? "The remaining misfit lines up with (p family-wise over the features):\n"
+                  ? "The remaining misfit lines up with (mean: the experiments' mean errors; scatter: their "
+                    "spread; p family-wise over the features and parts):\n"
                   : "The remaining misfit lines up with no path feature at alpha; the closest "
-                    "(p family-wise over the features):\n";
+                    "(p family-wise over the features and parts):\n";
     }
     if (shown > 0 && !(a.p_value < d.alpha)) break;
-    text += "  " + a.feature + " (p = " + format_number(a.p_value, "%.2g") + "): " + a.description + "\n";
+    text += "  " + a.feature + ", " + a.part + " (p = " + format_number(a.p_value, "%.2g") + "): " +
+            a.description + "\n";
     ++shown;
   }
   if (shown == 0) text += "No path feature varies across the experiments enough to test.\n";

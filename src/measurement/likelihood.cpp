@@ -74,7 +74,7 @@ void predict_path_runs(const SuiteExperiment& ex, const SuiteModel& model, const
   const Vector3 odometry = sampled_end_pose(ex.path, B);
   for (std::size_t i = first; i < first + count; ++i) {
     out[i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean + g.shift, p.cov + meas,
-              g.column, group, g.column2};
+              g.column, group, g.column2, p.noise_mean};
   }
 }
 
@@ -150,7 +150,7 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects, target,
                                      p.mean, &p.odometry_end_pose, run.heading0_rad);
     out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
-                 p.cov + meas, g.column, group, g.column2};
+                 p.cov + meas, g.column, group, g.column2, p.noise_mean};
   }, tbb::simple_partitioner());
   return out;
 }

@@ -80,7 +80,7 @@ std::optional<OdometryCorrection> odometry_correction(const Suite& suite, const 
   std::map<std::string, Sums> sums;
   bool changes = false;
   for (const SuiteExperiment& ex : suite.experiments) {
-    const std::string kind = ex.name.substr(0, ex.name.find('-'));
+    const std::string kind = experiment_kind(ex);
     if (!kinds.count(kind)) order.push_back(kind);
     CorrectionByKind& k = kinds[kind];
     k.kind = kind;

@@ -24,6 +24,7 @@ class FeatureAccumulator {
     const double travel = 0.5 * (std::abs(piece.left_m) + std::abs(piece.right_m));
     const double dtheta = (piece.right_m - piece.left_m) / B_;
     f_.distance_m += travel;
+    f_.duration_s += duration_s;
     f_.angle_turned_rad += dtheta;
     abs_turn_ += std::abs(dtheta);
     spin_ += std::abs(piece.right_m - piece.left_m);
@@ -31,6 +32,10 @@ class FeatureAccumulator {
     signed_centre_ += centre;
     abs_centre_ += std::abs(centre);
     if (duration_s > 0 && travel > 0) speed_weighted_ += travel * travel / duration_s;
+    if (duration_s > 0) {
+      swing(left_speed_, piece.left_m / duration_s);
+      swing(right_speed_, piece.right_m / duration_s);
+    }
     track(left_, piece.left_m);
     track(right_, piece.right_m);
   }
@@ -42,6 +47,7 @@ class FeatureAccumulator {
     f.travel_direction = abs_centre_ > 0 ? signed_centre_ / abs_centre_ : 0.0;
     f.reversals = left_.reversals + right_.reversals;
     f.speed_mps = f.distance_m > 0 ? speed_weighted_ / f.distance_m : 0.0;
+    f.acceleration_mps = 0.5 * (finished(left_speed_) + finished(right_speed_));
     return f;
   }
 
@@ -69,69 +75,124 @@ class FeatureAccumulator {
     }
   }
 
+  /// A wheel's speed as a zig-zag between turning points at least kAccelerationHysteresis_mps
+  /// apart, from standstill: `total` sums the swings completed so far.
+  struct Swing {
+    double anchor = 0.0, extreme = 0.0, total = 0.0;
+    int direction = 0;
+  };
+  static void swing(Swing& w, double speed) {
+    if (w.direction == 0) {
+      if (std::abs(speed - w.anchor) >= kAccelerationHysteresis_mps) {
+        w.direction = speed > w.anchor ? 1 : -1;
+        w.extreme = speed;
+      }
+      return;
+    }
+    if ((speed - w.extreme) * w.direction > 0) {
+      w.extreme = speed;
+    } else if (std::abs(speed - w.extreme) >= kAccelerationHysteresis_mps) {
+      w.total += std::abs(w.extreme - w.anchor);
+      w.anchor = w.extreme;
+      w.extreme = speed;
+      w.direction = -w.direction;
+    }
+  }
+  /// The total with the stop at the end (back to standstill).
+  static double finished(Swing w) {
+    swing(w, 0.0);
+    return w.total + (w.direction != 0 ? std::abs(w.extreme - w.anchor) : 0.0);
+  }
+
   double B_;
   PathFeatures f_;
   double abs_turn_ = 0, spin_ = 0, signed_centre_ = 0, abs_centre_ = 0, speed_weighted_ = 0;
   Wheel left_, right_;
+  Swing left_speed_, right_speed_;
 };
 
-double feature_value(const PathFeatures& f, const std::string& name) {
-  if (name == "distance") return f.distance_m;
-  if (name == "angle_turned") return f.angle_turned_rad;
-  if (name == "turn_direction") return f.turn_direction;
-  if (name == "spin_fraction") return f.spin_fraction;
-  if (name == "travel_direction") return f.travel_direction;
-  if (name == "reversals") return f.reversals;
-  return f.speed_mps;  // "speed"
+/// A residual feature: its value(s) for a run (two columns for the heading's direction), and
+/// what a misfit along it points at, in the mean and in the scatter. `columns` 0: the groups'
+/// one-way ANOVA. The one table every list of features comes from.
+struct Feature {
+  const char* name;
+  int columns;
+  double (*value)(const PathFeatures& f, int column);
+  const char* mean;
+  const char* scatter;
+};
+
+const std::vector<Feature>& features() {
+  static const std::vector<Feature> table = {
+      {"distance", 1, [](const PathFeatures& f, int) { return f.distance_m; },
+       "an error that grows with the distance driven: a scale error (scale_error) or unequal "
+       "wheel diameters (wheel_diameter_ratio) in the catalogue; when those are already in the "
+       "model, a scale that changes along the run (wear, tyre heating), which is in no "
+       "catalogue: a custom effect such as scale: 1 + a*s would model it",
+       "a spread that grows with the distance driven faster than the model's: wheel radii that "
+       "change from run to run (per_run_radius: variance as distance squared) or bumps; when the "
+       "long runs alone are too noisy, a custom noise: \"1 + a*s\" would model it"},
+      {"angle_turned", 1, [](const PathFeatures& f, int) { return f.angle_turned_rad; },
+       "an error that grows with the signed angle turned: a wrong effective wheelbase "
+       "(wheelbase_error); when that is in the model, a wheelbase that depends on how the "
+       "robot turns (turn_dependent_wheelbase, or a custom wheelbase_factor in kappa or r)",
+       "a spread that changes with the signed angle turned: heading noise that differs between "
+       "left and right turns; slip on turns (turn_slip) when it grows with the turning either way"},
+      {"turn_direction", 1, [](const PathFeatures& f, int) { return f.turn_direction; },
+       "an error that depends on the direction of the turns, not only on how much was turned: "
+       "left and right turns with different effective wheelbases or slip; not in the "
+       "catalogue: a custom effect such as wheelbase_factor: 1 + a*turn would model it",
+       "a spread that differs between left and right turns: slip that depends on the direction "
+       "of the turn; a custom effect with noise: \"1 + a*(turn > 0)\" would model it"},
+      {"spin_fraction", 1, [](const PathFeatures& f, int) { return f.spin_fraction; },
+       "an error that depends on how tightly the robot turns (spins against arcs against "
+       "lines): tyre scrub that moves the effective contact points with the kind of turn "
+       "(turn_dependent_wheelbase; or a custom wheelbase_factor: 1 + a*r)",
+       "extra noise on tight turns and spins: slip of the wheels as they scrub (turn_slip), or "
+       "a custom noise: \"1 + a*r\""},
+      {"travel_direction", 1, [](const PathFeatures& f, int) { return f.travel_direction; },
+       "an error that differs forwards and backwards: a scale or wheel diameter ratio that "
+       "depends on the direction of travel; not in the catalogue: a custom effect such as "
+       "scale: 1 + a*dir would model it (or backlash, when the runs reverse)",
+       "noise that differs forwards and backwards (a caster that shimmies one way): a custom "
+       "noise: \"1 + a*(dir < 0)\" would model it"},
+      {"reversals", 1, [](const PathFeatures& f, int) { return f.reversals; },
+       "an error that grows with the number of times a wheel reverses: lost motion at each "
+       "reversal, as play in the gears gives (backlash)",
+       "a spread that grows with the number of reversals: play whose size varies from one "
+       "reversal to the next, not the constant loss of backlash"},
+      {"speed", 1, [](const PathFeatures& f, int) { return f.speed_mps; },
+       "a scale or slip that grows with speed: not in the catalogue; a custom effect such as "
+       "scale: 1 + a*(v - v0) would model it",
+       "noise that grows with speed (slip and vibration at speed): not in the catalogue; a "
+       "custom effect with noise: \"1 + a*v\", a factor on the wheel-noise variance, would "
+       "model it"},
+      {"acceleration", 1, [](const PathFeatures& f, int) { return f.acceleration_mps; },
+       "an error that grows with the starts and stops (how much the wheels' speeds change): "
+       "wheels that slip as they speed up or slow down and lose distance; a custom effect "
+       "such as scale: \"1 - c*abs(a)\" (a the acceleration) would model it",
+       "noise that grows with the starts and stops: random slip as the wheels speed up or slow "
+       "down; a custom noise: \"1 + c*abs(a)\" would model it"},
+      {"group", 0, nullptr,
+       "an error that differs between groups (sessions, days, floors) more than the model "
+       "allows: a parameter that changes from group to group, e.g. tyre pressure or floor "
+       "(group_variation)",
+       "a spread that differs between groups (sessions, days, floors): noise that changes with "
+       "the surface or the tyres; the noise level refitted per group, or a group's own noise"},
+  };
+  return table;
 }
 
-std::string description(const std::string& feature) {
-  if (feature == "distance") {
-    return "an error that grows with the distance driven: a scale error (scale_error) or unequal "
-           "wheel diameters (wheel_diameter_ratio) in the catalogue; when those are already in the "
-           "model, a scale that changes along the run (wear, tyre heating), which is in no "
-           "catalogue: a custom effect such as scale: 1 + a*s would model it";
-  }
-  if (feature == "angle_turned") {
-    return "an error that grows with the signed angle turned: a wrong effective wheelbase "
-           "(wheelbase_error); when that is in the model, a wheelbase that depends on how the "
-           "robot turns (turn_dependent_wheelbase, or a custom wheelbase_factor in kappa or r)";
-  }
-  if (feature == "turn_direction") {
-    return "an error that depends on the direction of the turns, not only on how much was turned: "
-           "left and right turns with different effective wheelbases or slip; not in the "
-           "catalogue: a custom effect such as wheelbase_factor: 1 + a*turn would model it";
-  }
-  if (feature == "spin_fraction") {
-    return "an error that depends on how tightly the robot turns (spins against arcs against "
-           "lines): tyre scrub that moves the effective contact points with the kind of turn "
-           "(turn_dependent_wheelbase; or a custom wheelbase_factor: 1 + a*r)";
-  }
-  if (feature == "travel_direction") {
-    return "an error that differs forwards and backwards: a scale or wheel diameter ratio that "
-           "depends on the direction of travel; not in the catalogue: a custom effect such as "
-           "scale: 1 + a*dir would model it (or backlash, when the runs reverse)";
-  }
-  if (feature == "reversals") {
-    return "an error that grows with the number of times a wheel reverses: lost motion at each "
-           "reversal, as play in the gears gives (backlash)";
-  }
-  if (feature == "speed") {
-    return "a scale or slip that grows with speed: not in the catalogue; a custom effect such as "
-           "scale: 1 + a*(v - v0) would model it";
-  }
-  return "an error that differs between groups (sessions, days, floors) more than the model "
-         "allows: a parameter that changes from group to group, e.g. tyre pressure or floor "
-         "(group_variation)";
-}
-
-/// Each experiment's mean residual in the end frame and its predicted covariance (inverted).
+/// Each experiment's mean residual in the end frame and its predicted covariance (inverted),
+/// and its spread about its own mean against the prediction (the scatter part).
 struct ExperimentMean {
   Vector3 r = Vector3::Zero();
   Eigen::Matrix3d S = Eigen::Matrix3d::Zero();  // d r / d (Es, Eb, Ed), columns, end frame
   Matrix3 W = Matrix3::Zero();  // C^-1
   PathFeatures features;
   std::string group;
+  double scatter = 0.0;  // s_e = W_e / E[W_e]: 1 when the predicted spread is right
+  double shape = 0.0;    // nu_e/2 = 3 (n - 1)/2, the gamma shape of s_e; 0: no scatter part
 };
 
 /// RSS of the GLS fit of r_e = X_e b over the experiments.
@@ -152,6 +213,16 @@ double gls_rss(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::M
   return rss;
 }
 
+/// The F test's p-value and the alignment's fields, from the statistic and degrees of freedom.
+void f_result(double statistic, int dof1, int dof2, ResidualAlignment& out) {
+  out.dof1 = dof1;
+  out.dof2 = dof2;
+  out.statistic = statistic;
+  out.p_value_raw = boost::math::cdf(
+      boost::math::complement(boost::math::fisher_f(dof1, dof2), statistic));
+  out.testable = true;
+}
+
 /// F test of the nested designs X1 (H1) against X0 (H0).
 void f_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
             const std::vector<Eigen::MatrixXd>& X1, ResidualAlignment& out) {
@@ -162,10 +233,7 @@ void f_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::Matr
   if (out.dof1 <= 0 || out.dof2 <= 0) return;
   const double rss0 = gls_rss(ms, X0), rss1 = gls_rss(ms, X1);
   if (!(rss1 > 0) || !std::isfinite(rss0)) return;
-  out.statistic = std::max(0.0, (rss0 - rss1) / out.dof1) / (rss1 / out.dof2);
-  out.p_value_raw = boost::math::cdf(
-      boost::math::complement(boost::math::fisher_f(out.dof1, out.dof2), out.statistic));
-  out.testable = true;
+  f_result(std::max(0.0, (rss0 - rss1) / out.dof1) / (rss1 / out.dof2), out.dof1, out.dof2, out);
 }
 
 /// The systematic directions a feature can modulate: the wheel scale, the wheelbase and the
@@ -203,25 +271,53 @@ void add_features(PathFeatures& sum, const PathFeatures& f, double n) {
   sum.travel_direction += f.travel_direction / n;
   sum.reversals += f.reversals / n;
   sum.speed_mps += f.speed_mps / n;
+  sum.acceleration_mps += f.acceleration_mps / n;
+}
+
+/// The scatter part of an experiment (see residual_alignment): W_e = sum d_i' Sigma_i^-1 d_i
+/// with d_i the end-frame residuals about their own mean, over its expectation under the model;
+/// shape 0 (no scatter part) for a lone run or a covariance that cannot be inverted.
+void experiment_scatter(const std::vector<Vector3>& r, const std::vector<Matrix3>& cov, ExperimentMean& m) {
+  const std::size_t n = r.size();
+  if (n < 2) return;
+  const double nd = static_cast<double>(n);
+  Vector3 mean = Vector3::Zero();
+  Matrix3 cov_mean = Matrix3::Zero();
+  for (std::size_t i = 0; i < n; ++i) mean += r[i] / nd, cov_mean += cov[i] / nd;
+  double w = 0.0, expected = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::LDLT<Matrix3> ldlt(cov[i]);
+    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return;
+    const Vector3 d = r[i] - mean;
+    w += d.dot(ldlt.solve(d));
+    expected += kDim * (1.0 - 2.0 / nd) + ldlt.solve(cov_mean).trace() / nd;
+  }
+  if (!(w > 0) || !(expected > 0)) return;
+  m.scatter = w / expected;
+  m.shape = 0.5 * kDim * (nd - 1.0);
 }
 
 /// Experiment e's mean residual, its sensitivities to the factor directions (from the nudged
 /// models' residuals `nudges`) and its covariance, all in the runs' end frames, with its mean
-/// features and group. False when the covariance is not positive definite (no test can use
-/// the experiment).
+/// features, group and scatter part. False when the covariance is not positive definite (no
+/// test can use the experiment).
 bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& residuals,
                      const std::vector<Residuals>& nudges, double B, ExperimentMean& m) {
   const double n = static_cast<double>(ex.runs.size());
   Matrix3 C = Matrix3::Zero();
   PathFeatures sum;
+  std::vector<Vector3> runs;
+  std::vector<Matrix3> covs;
   for (std::size_t r = 0; r < ex.runs.size(); ++r) {
     const Matrix3 R = end_frame(odometry_end_pose(ex, ex.runs[r], B).z());
     const RunResidual& res = residuals[e][r];
-    m.r += R * (res.error - res.mean) / n;
+    runs.push_back(R * (res.error - res.mean));
+    covs.push_back(R * res.cov * R.transpose());
+    m.r += runs.back() / n;
     for (int j = 0; j < kDim; ++j) {
       m.S.col(j) += R * (nudges[static_cast<std::size_t>(j)][e][r].mean - res.mean) / (kSensitivityStep * n);
     }
-    C += R * res.cov * R.transpose() / (n * n);
+    C += covs.back() / (n * n);
     add_features(sum, path_features(ex, ex.runs[r], B), n);
   }
   const Eigen::LDLT<Matrix3> ldlt(C);
@@ -229,6 +325,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
   m.W = ldlt.solve(Matrix3::Identity());
   m.features = sum;
   m.group = experiment_group(ex);
+  experiment_scatter(runs, covs, m);
   return true;
 }
 
@@ -249,43 +346,154 @@ std::vector<ExperimentMean> experiment_means(const Suite& suite, const SuiteMode
   return ms;
 }
 
-/// H1 of a path feature: the base design X0 plus the same terms modulated by the feature,
-/// centred and scaled (the fit does not depend on it, its conditioning does); F test against
-/// X0, untestable when the feature does not vary across the experiments.
-void feature_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
-                  const std::string& name, ResidualAlignment& a) {
-  double mean = 0, spread = 0;
-  for (const ExperimentMean& m : ms) mean += feature_value(m.features, name) / static_cast<double>(ms.size());
-  for (const ExperimentMean& m : ms) spread = std::max(spread, std::abs(feature_value(m.features, name) - mean));
-  if (!(spread > 1e-9 * std::max(1.0, std::abs(mean)))) return;
+/// A feature's columns over the experiments, each centred and scaled to at most 1 in absolute
+/// value (the fits do not depend on it, their conditioning does); the columns that do not vary
+/// across the experiments are dropped.
+std::vector<Eigen::VectorXd> feature_columns(const std::vector<const ExperimentMean*>& ms, const Feature& f) {
+  std::vector<Eigen::VectorXd> out;
+  const auto m = static_cast<Eigen::Index>(ms.size());
+  for (int c = 0; c < f.columns; ++c) {
+    Eigen::VectorXd v(m);
+    for (Eigen::Index e = 0; e < m; ++e) v(e) = f.value(ms[static_cast<std::size_t>(e)]->features, c);
+    if (m == 0) continue;
+    const double mean = v.mean();
+    v.array() -= mean;
+    const double spread = v.cwiseAbs().maxCoeff();
+    if (!(spread > 1e-9 * std::max(1.0, std::abs(mean))) || !std::isfinite(spread)) continue;
+    out.push_back(v / spread);
+  }
+  return out;
+}
+
+/// Mean part of a path feature: the base design X0 plus the same terms modulated by each of the
+/// feature's columns; F test against X0, untestable when the feature does not vary.
+void mean_feature_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
+                       const Feature& f, ResidualAlignment& a) {
+  std::vector<const ExperimentMean*> all;
+  for (const ExperimentMean& m : ms) all.push_back(&m);
+  const std::vector<Eigen::VectorXd> cols = feature_columns(all, f);
+  if (cols.empty()) return;
   std::vector<Eigen::MatrixXd> X1;
   for (std::size_t e = 0; e < ms.size(); ++e) {
-    const double f = (feature_value(ms[e].features, name) - mean) / spread;
-    Eigen::MatrixXd x(kDim, 4 * kDim);
-    x << X0[e], f * X0[e];
+    Eigen::MatrixXd x(kDim, X0[e].cols() * static_cast<Eigen::Index>(1 + cols.size()));
+    x.leftCols(X0[e].cols()) = X0[e];
+    for (std::size_t c = 0; c < cols.size(); ++c) {
+      x.middleCols(X0[e].cols() * static_cast<Eigen::Index>(c + 1), X0[e].cols()) =
+          cols[c](static_cast<Eigen::Index>(e)) * X0[e];
+    }
     X1.push_back(x);
   }
   f_test(ms, X0, X1, a);
 }
 
-/// One-way ANOVA of the groups: the base terms per group against common ones; untestable with
-/// fewer than two groups.
-void group_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
-                ResidualAlignment& a) {
+/// The groups of the experiments, indexed in order of first appearance.
+std::vector<int> group_indices(const std::vector<const ExperimentMean*>& ms, int& groups) {
   std::map<std::string, int> index;
-  for (const ExperimentMean& m : ms) index.emplace(m.group, static_cast<int>(index.size()));
-  const auto groups = static_cast<Eigen::Index>(index.size());
+  std::vector<int> out;
+  for (const ExperimentMean* m : ms) out.push_back(index.emplace(m->group, static_cast<int>(index.size())).first->second);
+  groups = static_cast<int>(index.size());
+  return out;
+}
+
+/// Mean part of the groups: one-way ANOVA, the base terms per group against common ones;
+/// untestable with fewer than two groups.
+void mean_group_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
+                     ResidualAlignment& a) {
+  std::vector<const ExperimentMean*> all;
+  for (const ExperimentMean& m : ms) all.push_back(&m);
+  int groups = 0;
+  const std::vector<int> g = group_indices(all, groups);
   if (groups < 2) return;
   std::vector<Eigen::MatrixXd> X1;
   for (std::size_t e = 0; e < ms.size(); ++e) {
     Eigen::MatrixXd x = Eigen::MatrixXd::Zero(kDim, 2 * kDim * groups);
-    x.middleCols(2 * kDim * index.at(ms[e].group), 2 * kDim) = X0[e];
+    x.middleCols(2 * kDim * g[e], 2 * kDim) = X0[e];
     X1.push_back(x);
   }
   f_test(ms, X0, X1, a);
 }
 
-/// Family-wise p-values (Bonferroni over the testable features), then testable features
+/// A gamma GLM with log link and known shapes k_e [McCullagh89, ch. 8], fitted by iteratively
+/// reweighted least squares (with the log link the working weights are the shapes):
+/// its deviance 2 sum k ((s - mu)/mu - ln(s/mu)) and Pearson statistic sum k (s - mu)^2/mu^2.
+struct GammaFit {
+  double deviance = 0.0, pearson = 0.0;
+  bool ok = false;
+};
+
+/// IRLS iterations at most, and the change in the coefficients that ends them.
+constexpr int kGlmIterations = 50;
+constexpr double kGlmTolerance = 1e-10;
+
+GammaFit gamma_fit(const Eigen::VectorXd& s, const Eigen::VectorXd& k, const Eigen::MatrixXd& X) {
+  Eigen::VectorXd beta = Eigen::VectorXd::Zero(X.cols());
+  beta(0) = std::log(k.dot(s) / k.sum());  // the first column is the intercept
+  for (int it = 0; it < kGlmIterations; ++it) {
+    const Eigen::VectorXd eta = X * beta;
+    const Eigen::VectorXd mu = eta.array().exp();
+    const Eigen::VectorXd z = eta.array() + (s.array() - mu.array()) / mu.array();
+    const Eigen::MatrixXd A = X.transpose() * k.asDiagonal() * X;
+    const Eigen::VectorXd next = A.ldlt().solve(X.transpose() * k.asDiagonal() * z);
+    if (!next.allFinite()) return {};
+    const double change = (next - beta).cwiseAbs().maxCoeff();
+    beta = next;
+    if (change < kGlmTolerance) break;
+  }
+  const Eigen::ArrayXd mu = (X * beta).array().exp();
+  GammaFit f;
+  f.deviance = 2.0 * (k.array() * ((s.array() - mu) / mu - (s.array() / mu).log())).sum();
+  f.pearson = (k.array() * (s.array() - mu).square() / mu.square()).sum();
+  f.ok = std::isfinite(f.deviance) && f.pearson > 0;
+  return f;
+}
+
+/// Scatter part: the gamma GLM of the experiments' scatter ratios on the design X1 (an
+/// intercept first) against the intercept alone, with the dispersion estimated from H1's
+/// Pearson statistic: F = ((D0 - D1)/q) / (X1^2/(m - p1)) ~ F(q, m - p1).
+void scatter_test(const std::vector<const ExperimentMean*>& ms, const Eigen::MatrixXd& X1, ResidualAlignment& a) {
+  const auto m = static_cast<Eigen::Index>(ms.size());
+  const auto p1 = X1.cols();
+  if (p1 < 2 || m - p1 <= 0) return;
+  Eigen::VectorXd s(m), k(m);
+  for (Eigen::Index e = 0; e < m; ++e) {
+    s(e) = ms[static_cast<std::size_t>(e)]->scatter;
+    k(e) = ms[static_cast<std::size_t>(e)]->shape;
+  }
+  const GammaFit h0 = gamma_fit(s, k, Eigen::MatrixXd::Ones(m, 1));
+  const GammaFit h1 = gamma_fit(s, k, X1);
+  if (!h0.ok || !h1.ok) return;
+  const auto q = static_cast<int>(p1 - 1), dof2 = static_cast<int>(m - p1);
+  const double dispersion = h1.pearson / dof2;
+  f_result(std::max(0.0, (h0.deviance - h1.deviance) / q) / dispersion, q, dof2, a);
+}
+
+/// The scatter part of one feature: log E s_e linear in the feature's columns (a variance that
+/// grows with it), or for the groups one level per group.
+void scatter_feature_test(const std::vector<ExperimentMean>& all, const Feature& f, ResidualAlignment& a) {
+  std::vector<const ExperimentMean*> ms;
+  for (const ExperimentMean& m : all) {
+    if (m.shape > 0) ms.push_back(&m);
+  }
+  const auto m = static_cast<Eigen::Index>(ms.size());
+  Eigen::MatrixXd X;
+  if (f.columns == 0) {
+    int groups = 0;
+    const std::vector<int> g = group_indices(ms, groups);
+    if (groups < 2) return;
+    X = Eigen::MatrixXd::Zero(m, groups);
+    X.col(0).setOnes();
+    for (Eigen::Index e = 0; e < m; ++e) {
+      if (g[static_cast<std::size_t>(e)] > 0) X(e, g[static_cast<std::size_t>(e)]) = 1.0;
+    }
+  } else {
+    const std::vector<Eigen::VectorXd> cols = feature_columns(ms, f);
+    X = Eigen::MatrixXd::Ones(m, static_cast<Eigen::Index>(1 + cols.size()));
+    for (std::size_t c = 0; c < cols.size(); ++c) X.col(static_cast<Eigen::Index>(c + 1)) = cols[c];
+  }
+  scatter_test(ms, X, a);
+}
+
+/// Family-wise p-values (Bonferroni over every testable feature and part), then testable ones
 /// first, each by raw p-value.
 void adjust_and_rank(std::vector<ResidualAlignment>& out) {
   int tests = 0;
@@ -318,9 +526,11 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
 std::string experiment_group(const SuiteExperiment& ex) { return group_key(ex); }
 
 const std::vector<std::string>& residual_feature_names() {
-  static const std::vector<std::string> names = {"distance",         "angle_turned", "turn_direction",
-                                                 "spin_fraction",    "travel_direction",
-                                                 "reversals",        "speed",        "group"};
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> out;
+    for (const Feature& f : features()) out.emplace_back(f.name);
+    return out;
+  }();
   return names;
 }
 
@@ -328,8 +538,8 @@ std::vector<ResidualAlignment> residual_alignment(
     const Suite& suite, const SuiteModel& model,
     const std::vector<std::vector<RunResidual>>& residuals) {
   const std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals);
-  // H0: the misfit is a constant offset in the end frame plus constant factor errors,
-  // r_e = [I3 S_e] c. H1 adds the same terms modulated by the feature, f_e [I3 S_e] d: a
+  // Mean part, H0: the misfit is a constant offset in the end frame plus constant factor
+  // errors, r_e = [I3 S_e] c. H1 adds the same terms modulated by the feature, f_e [I3 S_e] d: a
   // scale, wheelbase or diameter ratio (or an offset) that varies with the feature.
   std::vector<Eigen::MatrixXd> X0;
   for (const ExperimentMean& m : ms) {
@@ -338,16 +548,23 @@ std::vector<ResidualAlignment> residual_alignment(
     X0.push_back(x);
   }
   std::vector<ResidualAlignment> out;
-  for (const std::string& name : residual_feature_names()) {
-    ResidualAlignment a;
-    a.feature = name;
-    a.description = description(name);
-    if (!ms.empty() && name != "group") {
-      feature_test(ms, X0, name, a);
-    } else if (!ms.empty()) {
-      group_test(ms, X0, a);
+  for (const Feature& f : features()) {
+    ResidualAlignment mean, scatter;
+    mean.feature = scatter.feature = f.name;
+    mean.part = "mean";
+    scatter.part = "scatter";
+    mean.description = f.mean;
+    scatter.description = f.scatter;
+    if (!ms.empty()) {
+      if (f.columns == 0) {
+        mean_group_test(ms, X0, mean);
+      } else {
+        mean_feature_test(ms, X0, f, mean);
+      }
+      scatter_feature_test(ms, f, scatter);
     }
-    out.push_back(std::move(a));
+    out.push_back(std::move(mean));
+    out.push_back(std::move(scatter));
   }
   adjust_and_rank(out);
   return out;

@@ -38,7 +38,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const Suite suite = load_suite((out / "suite.yaml").string());
     // As the CLI: order 2 (the default) beyond its piece limit is refused, not computed.
     if (second_order_problem(suite, suite_model(suite).order).empty()) {
-      compare(suite, suite_model(suite), 0.01);
+      fuzz::compare_both_ways(suite);
     }
   } catch (const InputError& e) {
     fuzz::invariant_failed(std::string("synth wrote a suite that does not load: ") + e.what());

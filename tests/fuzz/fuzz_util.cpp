@@ -74,6 +74,15 @@ void invariant_failed(const std::string& what) {
   std::abort();
 }
 
+void compare_both_ways(const Suite& suite) {
+  CalibrationOptions c;
+  c.method = CalibrationMethod::gaussian;
+  compare(suite, suite_model(suite), 0.01, c);
+  c.method = CalibrationMethod::simulation;
+  c.max_replicates = 9;
+  compare(suite, suite_model(suite), 0.01, c);
+}
+
 void check_imported_suite(const std::vector<ImportedFile>& files, const std::string& importer) {
   const fs::path out = scratch_dir("out");
   for (const ImportedFile& f : files) {
@@ -84,7 +93,7 @@ void check_imported_suite(const std::vector<ImportedFile>& files, const std::str
     const Suite suite = load_suite((out / "suite.yaml").string());
     // As the CLI: order 2 (the default) beyond its piece limit is refused, not computed.
     if (second_order_problem(suite, suite_model(suite).order).empty()) {
-      compare(suite, suite_model(suite), 0.01);
+      compare_both_ways(suite);
     }
   } catch (const InputError& e) {
     invariant_failed(importer + " wrote a suite that does not load: " + e.what());

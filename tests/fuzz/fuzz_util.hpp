@@ -31,6 +31,11 @@ void write_text(const std::filesystem::path& path, const std::string& text);
 /// not load back). libFuzzer records the input as a crash.
 [[noreturn]] void invariant_failed(const std::string& what);
 
+/// compare as the CLI runs it, both ways: against the Gaussian references, and calibrated by the
+/// referee (the model's simulated world) with a few replicates, so the simulation of every
+/// fuzzed suite's runs is exercised too.
+void compare_both_ways(const Suite& suite);
+
 /// What an importer wrote must load back as a suite and compare, as in the CLI (order 2 only
 /// within its piece limit): writes `files` under a scratch directory and checks that, else
 /// invariant_failed naming `importer`.

@@ -86,6 +86,12 @@ struct ObservedExperiment {
 using CandidateCompletion = std::string (*)(const std::vector<ObservedExperiment>& data,
                                             EffectSpec& spec, std::vector<double>& stderrs);
 
+/// An effect whose tails the Gaussian likelihood cannot see (bumps): makes its impulses `factor`
+/// times larger at the same variance (bumps: sigma x factor, rate / factor^2), so the fourth
+/// cumulant it adds, and the excess kurtosis of the errors, grow by factor^2. diagnose uses it
+/// to give an adopted effect the data's kurtosis in the model's simulated world.
+using TailRescale = void (*)(EffectSpec& spec, double factor);
+
 struct EffectInfo {
   std::string name;
   std::vector<EffectParameterInfo> parameters;
@@ -111,6 +117,8 @@ struct EffectInfo {
   /// The candidate a Gaussian likelihood cannot tell this one apart from ("" for none): when both
   /// are significant, heavy tails put the one with heavy_tails first, Gaussian tails the other.
   std::string confused_with{};
+  /// May be nullptr; see TailRescale.
+  TailRescale rescale_tails = nullptr;
   /// How many standard-normal per-run constants the model carries for the effect
   /// (per_run_radius: 2; a custom effect: one per random parameter); a model holds at most
   /// kMaxRunConstants (4) in all.
@@ -258,6 +266,13 @@ std::string check_run_constants(const EffectList& list);
 /// at most kMaxEffects entries. Every entry point that builds effects (Simulator, predict,
 /// resolve) calls it.
 void check_effects(const EffectList& list);
+
+/// "" when every effect of the list adds only Gaussian noise or deterministic changes on the
+/// world side, else the first that does not and why ("bumps: Poisson impulses (heavy tails)").
+/// An effect at a size where it does nothing (bumps at rate 0) counts as Gaussian. compare
+/// takes its Gaussian tests as exact only for such a list (docs/diagnose.md, "How compare
+/// decides"). Throws EffectError for an invalid list.
+std::string non_gaussian_effect(const EffectList& list);
 
 /// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}" or
 /// "- group_variation: {parameter: wheelbase_error.Eb, sd: 0.002}", or for a custom effect its

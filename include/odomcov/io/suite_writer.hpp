@@ -32,6 +32,9 @@ struct SuiteDocument {
     /// The experiment's group (written as `group:` when not empty): runs of one group share
     /// group_variation's draw (a session, a day).
     std::string group;
+    /// The experiment's kind (written as `kind:` when not empty; the loader's default is the
+    /// name up to its first '-').
+    std::string kind;
   };
   std::vector<Experiment> experiments;
 };

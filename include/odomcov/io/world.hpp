@@ -27,6 +27,7 @@ struct WorldExperiment {
   Path path;
   std::string path_yaml;  // the path block as written (YAML text), to copy into the suite
   std::string group;      // `group:`, copied into the suite; empty: a group of its own
+  std::string kind;       // `kind:`, copied into the suite; empty: the name's default
   StartHeading heading0;
   int line = 0;           // of the experiment in the world file, for messages
 };

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -58,20 +59,46 @@ inline constexpr double kFitTolerance = 1e-3;
 /// difference points. Shared by fits from the same model (diagnose's candidates), so a
 /// parameter's sensitivity is propagated once per round. Effects whose values are all neutral
 /// do nothing and are left out of the key. Not thread-safe.
+///
+/// A *view* of a cache holds only some experiments of its suite (a cross-validation fold's
+/// training runs): its residuals are the parent's restricted to them, so a fit on the view
+/// maximises the likelihood of those runs alone, while every model is still propagated once,
+/// for the whole suite, in the store the parent and its views share (the held-out runs'
+/// predictions come with it).
 class ResidualCache {
  public:
-  explicit ResidualCache(const Suite& suite) : suite_(&suite) {}
-  /// The residuals of `model`, computed on the first request (then `counter` is incremented).
+  explicit ResidualCache(const Suite& suite);
+  /// A view of `parent` (or of the parent's own suite) keeping the experiments `keep` marks
+  /// (one flag per experiment of the suite).
+  ResidualCache(ResidualCache& parent, std::vector<bool> keep);
+  /// The residuals of `model`, computed on the first request (then `counter` is incremented):
+  /// of every experiment, or of the view's.
   const std::vector<std::vector<RunResidual>>& at(const SuiteModel& model,
                                                   std::atomic<std::int64_t>* counter = nullptr);
-  /// How many propagations of the whole suite the cache has run.
-  std::int64_t computed() const { return computed_; }
+  /// The residuals of every experiment of the suite, whatever the view.
+  const std::vector<std::vector<RunResidual>>& full(const SuiteModel& model,
+                                                    std::atomic<std::int64_t>* counter = nullptr);
+  /// The residuals of `model` (of the view's experiments) computed now and not kept: for
+  /// evaluations that are not used again (an exact optimiser's).
+  std::vector<std::vector<RunResidual>> evaluate(const SuiteModel& model);
+  /// How many propagations of the whole suite the shared store has run.
+  std::int64_t computed() const;
+  const Suite& suite() const;
 
  private:
-  const Suite* suite_;
-  std::map<std::string, std::vector<std::vector<RunResidual>>> by_model_;
-  std::int64_t computed_ = 0;
+  struct Store;
+  std::shared_ptr<Store> store_;
+  std::vector<bool> keep_;  // empty: every experiment
+  std::map<std::string, std::vector<std::vector<RunResidual>>> subsets_;
 };
+
+/// The residuals of the experiments `keep` marks, in order.
+std::vector<std::vector<RunResidual>> select_experiments(
+    const std::vector<std::vector<RunResidual>>& residuals, const std::vector<bool>& keep);
+
+/// The value of a fitted parameter in a model, by its fit name: a robot parameter ("k_left")
+/// or an effect's ("wheelbase_error.Eb"). Throws std::invalid_argument when the model lacks it.
+double& fitted_parameter(SuiteModel& model, const std::string& name);
 
 struct FitResult {
   std::vector<std::string> names;
@@ -86,6 +113,15 @@ struct FitResult {
   double log_likelihood_after = 0.0;   // of the kind maximised
   int evaluations = 0;  // exact likelihood evaluations (propagations of every run)
   int anchors = 0;      // fast path: the points it linearised at
+  /// Fast path: true when the exact log-likelihood confirmed the surrogate at the end (its
+  /// optimum foretold to within kFitTolerance, or no gain left from a fresh anchor), which makes
+  /// the answer the exact model's optimum; false when the surrogate mispredicted and steps had
+  /// to be cut (a strongly nonlinear parameter), or the anchors ran out. The exact path: true.
+  bool verified = true;
+  /// The fitted parameters that ended at a bound of their range that is not their neutral value
+  /// (within half a standard error of it, or exactly there when the information is singular):
+  /// the data pushed them to the edge of what the fit allows, e.g. Eb_arc = 0.5.
+  std::vector<std::string> at_bound;
   std::vector<std::string> warnings;
   SuiteModel model;  // the fitted model
 };
@@ -109,6 +145,22 @@ FitResult fit(const Suite& suite, const SuiteModel& start, const std::vector<std
               Likelihood likelihood = Likelihood::full,
               std::atomic<std::int64_t>* evaluations = nullptr, FitPath path = FitPath::fast,
               ResidualCache* cache = nullptr);
+
+/// The exact decision on a fast fit: when `fast` is not verified (its surrogate mispredicted),
+/// the parameters `own` (a candidate's own, the nonlinear ones) are refitted on the exact path
+/// from its optimum, the others held, and when that raises the exact log-likelihood the fast
+/// path runs again from there over every name (for the other parameters and the standard
+/// errors at the new optimum). A verified fit comes back unchanged. `cache` is the one the fast
+/// fit used (a view for a fold's fit).
+FitResult refit_exactly(const FitResult& fast, const std::vector<std::string>& own,
+                        Likelihood likelihood, std::atomic<std::int64_t>* evaluations,
+                        ResidualCache& cache);
+/// The same, also from `start` (a user's candidate at its given values): a strongly nonlinear
+/// expression (a time constant) can leave the fast path in another basin of the exact
+/// likelihood, from whose optimum no local exact step escapes. `own` is refitted exactly from
+/// both points, and the better optimum stands (then the fast path over every name, as above).
+FitResult refit_exactly_from_both(const FitResult& fast, const SuiteModel& start, const std::vector<std::string>& own,
+                                  Likelihood likelihood, std::atomic<std::int64_t>* evaluations, ResidualCache& cache);
 
 struct UmbmarkResult {
   double side_m = 0.0;

@@ -1,7 +1,9 @@
 // compare: a model set against every experiment of a measurement suite, with the statistical
-// tests of each experiment, the suite's kurtosis test and the verdict.
+// tests of each experiment, the suite's kurtosis test and the verdict, calibrated by the
+// Gaussian references where they are exact and by simulating the model's own world elsewhere.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -10,6 +12,17 @@
 #include "odomcov/engine/statistics.hpp"
 
 namespace odomcov {
+
+/// What one test's p-values are under the calibration in use.
+struct CalibratedTest {
+  double p_gaussian = 1.0;  // against the Gaussian reference (the fast path's p-value)
+  /// Family-wise: with the simulation, the share of replicates whose smallest p-value is at or
+  /// below this test's (1 + k)/(B + 1), or the tail model when no replicate reaches it; with the
+  /// Gaussian reference, Bonferroni. The test fails when it is at or below alpha.
+  double p_family = 1.0;
+  double p_mc_error = 0.0;         // Monte-Carlo standard error of the test's p_value
+  double p_family_mc_error = 0.0;  // and of p_family (binomial)
+};
 
 /// compare for one experiment (docs/json.md, "compare").
 struct ExperimentComparison {
@@ -20,6 +33,7 @@ struct ExperimentComparison {
   Matrix3 predicted_cov = Matrix3::Zero();   // (mixture over runs for logged experiments)
   TestResult mean_test;   // Hotelling's T^2 on whitened residuals (chi^2 when n <= 3)
   TestResult cov_test;    // LRT of cov = I on whitened residuals (NEES test when n < 10)
+  CalibratedTest mean_calibration, cov_calibration;  // their p_value's calibration
   std::string cov_method;  // "lrt" or "nees"
   double nees_mean = 0.0;
   double outside_95 = 0.0;  // fraction of runs with NEES above the chi^2_3 95% point
@@ -31,6 +45,9 @@ struct ExperimentComparison {
   Vector3 mean_p = Vector3::Ones();        // Student-t p-values
   Vector3 variance_ratio = Vector3::Ones();  // measured / predicted variance
   Vector3 variance_p = Vector3::Ones();    // chi^2 p-values (two-sided)
+  /// With a model that records its training domain (SuiteModel::domain): where this
+  /// experiment's runs lie outside it, in words (extrapolation()); empty inside.
+  std::vector<std::string> extrapolation;
 
   /// Correlation of components a and b (0 x, 1 y, 2 theta), measured and predicted.
   double measured_correlation(int a, int b) const;
@@ -54,26 +71,96 @@ struct Failure {
   int other = 0;
 };
 
+/// How compare calibrates its tests (docs/diagnose.md, "How compare decides").
+///  * gaussian: each test against its Gaussian reference (Hotelling's F, the Bartlett-corrected
+///    LRT's chi^2, the NEES sum's chi^2, Mardia's normal), Bonferroni over the tests. Exact when
+///    the model's errors are Gaussian.
+///  * simulation: the referee. Each test's statistic is set against its distribution in the
+///    model's own world (ModelWorld, referee.hpp), and the family-wise verdict against the
+///    distribution of the smallest p-value of a replicate (single-step min-P [Westfall93]).
+///  * automatic: gaussian when the model's errors are Gaussian to within what the suite's runs
+///    could detect (every effect Gaussian on the world side, non_gaussian_effect, and little
+///    heading nonlinearity), else simulation.
+enum class CalibrationMethod { automatic, gaussian, simulation };
+const char* calibration_name(CalibrationMethod method);  // "automatic", "gaussian", "simulation"
+
+/// Replicates: the simulation looks after 99, 199, 399, 799, ... replicates (B + 1 = 100 2^i)
+/// and stops when the verdict at alpha is decided; kDefaultReplicates caps B.
+inline constexpr std::int64_t kFirstLookReplicates = 99;
+inline constexpr std::int64_t kDefaultReplicates = 1599;
+inline constexpr std::int64_t kMaxReplicates = 1'000'000;
+inline constexpr std::uint64_t kDefaultRefereeSeed = 1;
+
+/// How far the referee has got, for a progress display: replicates simulated and the number it
+/// is heading for (the next look).
+struct RefereeProgress {
+  std::atomic<std::int64_t> done{0};
+  std::atomic<std::int64_t> target{0};
+};
+
+struct CalibrationOptions {
+  CalibrationMethod method = CalibrationMethod::automatic;
+  std::int64_t max_replicates = kDefaultReplicates;  // B at most (sequential looks stop earlier)
+  std::uint64_t seed = kDefaultRefereeSeed;
+  RefereeProgress* progress = nullptr;
+};
+
+/// What the verdict used (docs/json.md, "compare": calibration).
+struct Calibration {
+  CalibrationMethod method = CalibrationMethod::gaussian;  // gaussian or simulation
+  std::string reason;       // why, in plain words
+  std::int64_t replicates = 0;  // B (simulation)
+  std::uint64_t seed = 0;
+  int tests = 0;            // valid tests in the family
+  double p_value = 1.0;     // family-wise p-value of the verdict
+  double p_mc_error = 0.0;  // its Monte-Carlo standard error
+  double p_interval[2] = {1.0, 1.0};  // Clopper-Pearson interval of the exceedance probability
+  double resolution = 0.0;  // 1/(B + 1): the smallest p-value the replicates resolve
+  /// The data are more extreme than every replicate: p_value is the tail model's (Bonferroni
+  /// over the tests' standardised p-values), below the resolution.
+  bool beyond_replicates = false;
+  /// The verdict is within Monte-Carlo error of alpha at the largest B allowed.
+  bool close_call = false;
+  double risk_per_look = 0.0;  // the Clopper-Pearson interval's level: 1 - risk
+  int looks = 0;
+};
+
 struct Comparison {
-  double alpha = 0.0;           // family-wise level of the suite
-  double alpha_per_test = 0.0;  // Bonferroni over 2 tests per experiment + kurtosis
+  double alpha = 0.0;  // family-wise level of the suite
+  /// The p-value below which one test fails: Bonferroni, alpha over 2 tests per experiment and
+  /// the kurtosis (Gaussian); with the simulation, the alpha-quantile of the replicates'
+  /// smallest p-value (the min-P critical value).
+  double alpha_per_test = 0.0;
   std::vector<ExperimentComparison> experiments;
   TestResult kurtosis;  // Mardia's b2, each experiment standardised by its own covariance
+  CalibratedTest kurtosis_calibration;
   double mardia_b2 = 0.0;        // run-weighted mean of the experiments' b2
   double mardia_expected = 0.0;  // its expectation for Gaussian errors (15 (n-1)/(n+1))
-  double kurtosis_scale = 1.0;   // pooled b2/E b2 when the covariance LRTs were kurtosis-scaled
+  /// Its median in the model's own world (simulation; NaN with the Gaussian reference, where it
+  /// is mardia_expected): a model with bumps expects heavier tails than Gaussian.
+  double mardia_model = 0.0;
   double log_likelihood = 0.0;
   Verdict verdict;
+  Calibration calibration;
   std::vector<Failure> failures;  // worst experiment first
 };
 
-/// The model against every experiment of the suite ("where it fails" included). The kurtosis
-/// test joins the verdict unless the model has a heavy-tailed effect (bumps), which predicts it;
-/// such a model's covariance LRTs are then scaled by each experiment's measured kurtosis
-/// ([Browne84]).
-Comparison compare(const Suite& suite, const SuiteModel& model, double alpha);
+/// The model against every experiment of the suite ("where it fails" included), its tests and
+/// the verdict at the family-wise `alpha` calibrated as `calibration` says: the Gaussian
+/// references where they are exact, else the simulated world of the model (the referee), seeded
+/// by calibration.seed. The kurtosis test joins every verdict.
+Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
+                   const CalibrationOptions& calibration = {});
 /// The same from the model's residuals(suite, model), already computed (diagnose's cache).
 Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
-                   const std::vector<std::vector<RunResidual>>& residuals);
+                   const std::vector<std::vector<RunResidual>>& residuals,
+                   const CalibrationOptions& calibration = {});
+
+/// The pooled Mardia kurtosis b2 that compare computes, averaged over `replicates` replicates of
+/// the model's own world (ModelWorld, seeded): the tails the model predicts for the suite. NaN
+/// when no experiment has kMinRunsForLrt (10) runs.
+double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
+                          const std::vector<std::vector<RunResidual>>& residuals,
+                          std::int64_t replicates, std::uint64_t seed);
 
 }  // namespace odomcov

@@ -5,14 +5,17 @@
 #pragma once
 
 #include <atomic>
+#include <limits>
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "odomcov/measurement/calibration.hpp"
 #include "odomcov/measurement/comparison.hpp"
+#include "odomcov/measurement/cross_validation.hpp"
 #include "odomcov/measurement/odometry_correction.hpp"
 #include "odomcov/measurement/residual_features.hpp"
 
@@ -50,6 +53,37 @@ const std::vector<CandidateType>& candidate_types();
 /// nullptr when unknown.
 const CandidateType* find_candidate(const std::string& name);
 
+/// A fold cannot test a candidate when the candidate's standard error fitted without the fold
+/// is more than this many times its standard error fitted on every run: the fold then holds
+/// more than 1 - 1/3^2 = 8/9 of the information about it (OptiOdom's scale and reference offset
+/// are pinned by the straight Ivanjko runs alone), and a prediction from the rest extrapolates.
+inline constexpr double kMaxFoldStderrRatio = 3.0;
+
+/// A fold can only test a candidate that changes its prediction: its in-sample gain on the
+/// fold's runs must reach this many log-likelihood units (a likelihood ratio of e^2 = 7.4,
+/// weak evidence on the scale of [Kass95]); a fold the candidate leaves alone has nothing to
+/// predict, and its gain (about 0) is not counted.
+inline constexpr double kMinFoldSignal = 2.0;
+
+/// A candidate predicts a fold worse when its held-out gain there is below minus this (the
+/// same e^2 evidence as kMinFoldSignal, against it): an effect that helps some kinds of path
+/// and hurts another is a compromise between them, not their cause, and it is a mimic even
+/// when its gains elsewhere outweigh the loss.
+inline constexpr double kMaxFoldLoss = 2.0;
+
+/// A fold that holds nearly all the information about a candidate (stderr_ratio r > 3) is not
+/// counted, but it can still contradict it: fitted without the fold, the candidate's k
+/// parameters are off by about r of the fold's own standard errors, which costs the fold about
+/// r^2 chi^2_k / 2 in log-likelihood; a loss beyond kMaxFoldLoss + r^2 q / 2, q the chi^2_k
+/// quantile at 1 - kContradictionAlpha, is more than that uncertainty explains.
+inline constexpr double kContradictionAlpha = 0.01;
+/// ... but only when the fold's training runs determine the candidate at all: its standard error
+/// fitted without the fold at most this many times the in-sample one (they hold at least 1% of
+/// the information). Beyond, the fold's fit is free to wander (a turn-dependent wheelbase's arc
+/// part fitted without any arc), and its value says nothing about what the other runs want.
+inline constexpr double kMaxContradictionStderrRatio = 10.0;
+double contradiction_bound(double stderr_ratio, int dof);
+
 /// Family-wise level of diagnose's decision: the best candidate must have p < alpha/m over the
 /// m candidates (Bonferroni). 0.01 keeps false alarms near 1% while finding moderate effects.
 inline constexpr double kDiagnoseAlpha = 0.01;
@@ -58,7 +92,15 @@ struct ModelSummary {
   double log_likelihood = 0.0;
   double nees_mean = 0.0;  // over all runs
   std::string verdict;     // compare's, at the same alpha
+  Calibration calibration;  // how compare calibrated that verdict
 };
+/// A comparison in brief: its log-likelihood, the NEES mean over all runs and its verdict.
+ModelSummary summarise(const Comparison& comparison);
+
+/// True when a new model moves the NEES mean further from 3 than the model before it, by more
+/// than the NEES mean's sampling error over `runs` runs allows, 2 sqrt(6/runs) (a right model's
+/// per-run NEES is chi^2_3, variance 6): an adoption that makes the predicted spread worse.
+bool moves_nees_away(const ModelSummary& before, const ModelSummary& after, std::size_t runs);
 
 struct Candidate {
   std::string effect;  // catalogue name or kWheelNoiseLevel
@@ -81,10 +123,60 @@ struct Candidate {
   std::string physics, signature;  // its CandidateType's, for explain
   bool robot = false;              // moves robot parameters: its YAML is the robot line
   SuiteModel model;   // the model with this candidate added
+
+  // ---- The decision. The fast path screens every candidate; a fit it cannot verify is redone
+  // on the exact path (refit_exactly) before anything is ranked. The significant candidates are
+  // then judged in order, and the first that passes every rule is adopted.
+  bool exact = false;  // its fit was redone on the exact path (the fast one was not verified)
+  /// A systematic candidate's gain in the mean alone: its predicted means against the base's,
+  /// both under the base's covariances (NaN for random candidates and group_variation), and
+  /// that gain's likelihood-ratio p-value.
+  double delta_mean_log_likelihood = std::numeric_limits<double>::quiet_NaN();
+  double mean_p_value = std::numeric_limits<double>::quiet_NaN();
+  /// The gain in held-out log-likelihood over the base (its part of the likelihood), summed
+  /// over the folds that can test it, each fold predicted by the candidate and by the base both
+  /// fitted without it; and per fold. NaN / empty when it was not cross-validated.
+  double delta_held_out = std::numeric_limits<double>::quiet_NaN();
+  struct FoldGain {
+    std::string fold;
+    double gain = 0.0;
+    /// The largest ratio of a parameter's standard error fitted without the fold to its
+    /// standard error fitted on every run (infinite where the fold's fit gives none).
+    double stderr_ratio = 1.0;
+    /// The candidate's in-sample gain on the fold's runs (the part it is judged on).
+    double signal = 0.0;
+    /// False when the fold cannot test the candidate: it holds nearly all that the runs say
+    /// about it (stderr_ratio > kMaxFoldStderrRatio: fitted without it, the candidate is not
+    /// determined), or the candidate changes nothing there (|signal| < kMinFoldSignal). Its
+    /// gain is then not counted.
+    bool counted = true;
+    /// An undetermined fold's loss beyond what the uncertainty of the candidate fitted without
+    /// it explains (contradiction_bound): the estimate from the other folds is not the one this
+    /// fold wants, so the candidate is not one cause of both.
+    bool contradicts = false;
+  };
+  std::vector<FoldGain> held_out_by_fold;
+  /// "adopted"; "mimic" (significant in-sample, predicts the held-out folds worse in all, one of
+  /// them worse by more than kMaxFoldLoss, or a fold that could not test it worse than its
+  /// uncertainty explains); "stopped"
+  /// (significant, but a guard stopped it: `rule`); "not significant"; "not judged"
+  /// (significant, ranked after the adopted one).
+  std::string verdict = "not significant";
+  /// The rule that stopped a stopped candidate or named a mimic: "parameter at bound",
+  /// "confounded", "covariance, not mean", "held-out likelihood", "NEES", "" otherwise.
+  std::string rule;
+  std::string decision;  // the verdict in plain words
+  std::vector<std::string> at_bound;  // parameters its fit left at a bound (FitResult::at_bound)
+  /// The largest |correlation| of its own parameters' estimates with a parameter of the
+  /// model's effects refitted beside it (1 without a standard error), and that parameter.
+  double confounded = 0.0;
+  std::string confounded_with;
 };
 
 struct Diagnosis {
   double alpha = kDiagnoseAlpha;
+  /// The folds the significant candidates were cross-validated on (none: judged in-sample).
+  Folds folds;
   std::size_t runs = 0;
   ModelSummary before;
   std::vector<Candidate> candidates;  // best first
@@ -124,15 +216,47 @@ struct DiagnoseProgress {
   std::atomic<std::int64_t> fits_total{0};
   std::atomic<std::int64_t> fits_done{0};
   std::atomic<std::int64_t> evaluations{0};
+  /// Set from outside (Ctrl-C) to stop: diagnose then throws Cancelled between two fits.
+  std::atomic<bool> cancel{false};
+  /// The round calibrate is in (1, 2, ...; 0 outside calibrate).
+  std::atomic<int> round{0};
+};
+
+/// What diagnose and calibrate throw when DiagnoseProgress::cancel is set.
+struct Cancelled : std::runtime_error {
+  Cancelled() : std::runtime_error("cancelled") {}
+};
+
+/// How one diagnose round runs and decides.
+struct DiagnoseOptions {
+  double alpha = kDiagnoseAlpha;
+  /// Only these candidates (by their name or their effect's); empty: all.
+  std::vector<std::string> only;
+  /// The user's own hypotheses (diagnose --candidates), tried from their given values.
+  EffectList candidates;
+  FitPath path = FitPath::fast;
+  /// Judge the significant candidates on the suite's folds (make_folds): a candidate that does
+  /// not predict the held-out folds better than the base is a mimic and is not adopted. With
+  /// false (or a suite of one experiment) they are judged in-sample only.
+  bool cross_validate = true;
+  /// How the compares of the model before and after calibrate their verdicts (compare; the
+  /// referee's seed and replicates).
+  CalibrationOptions calibration;
 };
 /// `candidates`: the user's own hypotheses (custom effects, or catalogue effects with starting
 /// values), tried beside the catalogue from their given values (diagnose --candidates).
 /// `path` is how every fit evaluates the likelihood (FitPath): the fast path shares one
 /// ResidualCache over the round, so each candidate parameter's sensitivity around the refitted
 /// model is propagated once.
+Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOptions& options,
+                   DiagnoseProgress* progress = nullptr);
+/// The same with the options one by one (cross-validated).
+/// `calibration` is how the compares of the model before and after calibrate their verdicts
+/// (compare; the referee's seed and replicates).
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, double alpha = kDiagnoseAlpha,
                    const std::vector<std::string>& only = {}, DiagnoseProgress* progress = nullptr,
-                   const EffectList& candidates = {}, FitPath path = FitPath::fast);
+                   const EffectList& candidates = {}, FitPath path = FitPath::fast,
+                   const CalibrationOptions& calibration = {});
 
 /// Plain words for a named candidate: the physics, the fitted size, the signature and where it
 /// showed, e.g. "unequal wheel diameters (Ed = D_R/D_L): Ed = 1.0041 +/- 0.0002; heading drifts

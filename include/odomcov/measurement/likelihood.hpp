@@ -31,6 +31,10 @@ struct RunResidual {
   Vector3 group_column = Vector3::Zero();
   int group = -1;  // index of the run's group (group_key) in order of first appearance
   Vector3 group_column2 = Vector3::Zero();
+  /// The noise-induced part of `mean` (Prediction::noise_mean): the mean of the part of the error
+  /// that is quadratic in the heading noise, the measure of how far from Gaussian it is
+  /// (compare's choice of calibration).
+  Vector3 noise_mean = Vector3::Zero();
 };
 
 /// Residuals of every run of every experiment (runs with logs are predicted one by one, in

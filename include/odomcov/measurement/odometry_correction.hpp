@@ -27,7 +27,7 @@ struct CorrectedParameters {
 };
 
 struct CorrectionByKind {
-  std::string kind;  // the experiment name's prefix before the first '-'
+  std::string kind;  // the experiments' kind (SuiteExperiment::kind)
   std::size_t runs = 0;
   CorrectedParameters parameters;  // effective over this kind's runs
   double mean_xy_before_m = 0.0, mean_xy_after_m = 0.0;  // mean |x-y error| over the runs

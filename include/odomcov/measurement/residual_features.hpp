@@ -1,8 +1,9 @@
-// What a model's remaining misfit lines up with: each experiment's mean residual, whitened by
-// its predicted standard error, set against features of the path the encoders drove (distance,
-// angle turned, turn direction, spin fraction, travel direction, reversals, speed, group). The
-// honest half of diagnose's verdict: when no catalogue effect is significant but the model is
-// still inconsistent, this says what kind of effect is missing, in the catalogue or not.
+// What a model's remaining misfit lines up with: each experiment's mean residual (the mean
+// part) and its spread about its own mean against the predicted covariance (the scatter part),
+// set against features of the path the encoders drove (distance, angle turned, turn direction,
+// spin fraction, travel direction, reversals, speed, acceleration, heading, group). The honest
+// half of diagnose's verdict: when no catalogue effect is significant but the model is still
+// inconsistent, this says what kind of effect is missing, in the catalogue or not.
 #pragma once
 
 #include <string>
@@ -21,7 +22,16 @@ struct PathFeatures {
   double travel_direction = 0.0;  // sum d / sum |d| of the centre travel: +1 forwards, -1 backwards
   double reversals = 0.0;         // reversals of either wheel's direction (5 mm hysteresis)
   double speed_mps = 0.0;         // mean wheel speed, weighted by the distance driven at it
+  double duration_s = 0.0;        // the run's duration: sum of its pieces' durations
+  /// Starts and stops: the total change of the wheels' speeds over the run, from and back to
+  /// standstill, sum |dv| averaged over the two wheels [m/s], counting only swings of at least
+  /// kAccelerationHysteresis_mps (encoder jitter on logged runs does not count). One start and
+  /// one stop at speed v give 2v.
+  double acceleration_mps = 0.0;
 };
+
+/// A wheel's speed counts as changed once it has moved this far from its last turning point.
+inline constexpr double kAccelerationHysteresis_mps = 0.05;
 
 /// The features of a run: planned paths from their keyframe intervals (constant wheel speeds,
 /// the motion the sample schedule follows), logged runs from their pieces and the time of each
@@ -32,24 +42,25 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
 /// (group_key: an experiment without one is a group of its own).
 std::string experiment_group(const SuiteExperiment& ex);
 
-/// The residual features, in the order of docs/json.md's list.
+/// The residual features, in the order of docs/json.md's list (each tested against both parts).
 const std::vector<std::string>& residual_feature_names();
 
-/// One feature's alignment with the misfit.
+/// One test of a feature against one part of the misfit.
 struct ResidualAlignment {
   std::string feature;
+  std::string part = "mean";  // "mean" (the experiments' mean residuals) or "scatter" (their spread)
   bool testable = false;   // false: the feature does not vary across experiments (or no dof)
   double statistic = 0.0;  // F
   int dof1 = 0, dof2 = 0;
-  double p_value_raw = 1.0;  // F test of this feature alone
-  double p_value = 1.0;      // Bonferroni over the testable features (family-wise)
+  double p_value_raw = 1.0;  // F test of this feature and part alone
+  double p_value = 1.0;      // Bonferroni over every testable feature and part (family-wise)
   std::string description;   // what kind of physical effect has this signature
 };
 
-/// Tests every feature against the mean residuals of the experiments, best (smallest p) first,
-/// untestable features last.
+/// Tests every feature against both parts of the misfit, best (smallest p) first, untestable
+/// ones last.
 ///
-/// Method. For experiment e with n runs, the mean residual r_e = mean_i (error_i - mean_i) is
+/// Mean part. For experiment e with n runs, the mean residual r_e = mean_i (error_i - mean_i) is
 /// taken in each run's odometry end frame (along-track, cross-track, heading); its predicted
 /// covariance is C_e = sum_i Sigma_i / n^2 (rotated alike), so under the model r_e ~ N(0, C_e).
 /// S_e (3x3) is the first-order sensitivity of r_e to the three factor directions a feature can
@@ -62,8 +73,19 @@ struct ResidualAlignment {
 /// with RSS the C_e^-1-weighted residual sums of squares over the m experiments. H0's constant
 /// terms and the estimated scale (RSS1) make the test about variation *with the feature*, not a
 /// misfit common to every experiment or an overall variance too small. group is the one-way
-/// ANOVA: H0's terms per group against common ones, F(6(G - 1), 3m - 6G). Each p_value is
-/// Bonferroni-corrected over the testable features.
+/// ANOVA: H0's terms per group against common ones, F(6(G - 1), 3m - 6G).
+///
+/// Scatter part. For experiment e with n >= 2 runs, d_i = r_i - mean_j r_j (end frame) and
+///   W_e = sum_i d_i' Sigma_i^-1 d_i,  E[W_e] = sum_i (3 (1 - 2/n) + tr(Sigma_i^-1 Sigma_bar)/n)
+/// (Sigma_bar the mean of the runs' Sigma_i; 3 (n - 1) when they are equal), so s_e = W_e/E[W_e]
+/// is ~ chi^2_nu/nu, nu = 3 (n - 1), when the predicted spread is right: a gamma variable of
+/// known shape nu/2. A variance that grows with the feature is the gamma GLM with log link
+///   H1: log E s_e = a + b f_e   against   H0: log E s_e = a,
+/// F = ((D0 - D1)/q) / (X1^2/(m - p1)) ~ F(q, m - p1), D the deviances
+/// 2 sum nu_e/2 ((s - mu)/mu - ln(s/mu)) and X1^2 H1's Pearson statistic, the dispersion
+/// estimated as in the mean part [McCullagh89, §8.3], so that an overall spread too large or tails
+/// heavier than Gaussian do not count. group: log E s_e per group against a common one.
+/// Each p_value is Bonferroni-corrected over every testable feature and part.
 std::vector<ResidualAlignment> residual_alignment(
     const Suite& suite, const SuiteModel& model,
     const std::vector<std::vector<RunResidual>>& residuals);

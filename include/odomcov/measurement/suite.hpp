@@ -2,6 +2,7 @@
 // its measured end pose, to set against the model.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -41,11 +42,35 @@ struct SuiteExperiment {
   /// group_variation's draw, so their runs are correlated. Empty: the experiment is a group of
   /// its own (group_key).
   std::string group;
+  /// The kind of path (`kind:`, e.g. "square", "circular"); the loader fills in the default,
+  /// default_kind(name), when the suite does not give one. Kinds are the folds of calibrate's
+  /// cross-validation and the rows of its per-kind reports.
+  std::string kind;
 };
+
+/// An experiment's kind when the suite does not say: its name up to the first '-' (OptiOdom's
+/// "square-230620202042-cw" is a "square"); the whole name when it has none.
+std::string default_kind(const std::string& experiment_name);
+/// The experiment's kind: its `kind`, or default_kind of its name when that is empty (a suite
+/// built in code).
+std::string experiment_kind(const SuiteExperiment& ex);
 
 /// The key that identifies an experiment's group: "group:<group>" when it has one, else
 /// "experiment:<name>" (a group of its own).
 std::string group_key(const SuiteExperiment& ex);
+
+/// The training domain of a calibrated model (`model: domain:` in a suite, written by
+/// calibrate): the range of each feature over the runs the model was fitted on, per run. A
+/// prediction for runs outside it is an extrapolation, and compare says so.
+struct Domain {
+  struct Range {
+    double lo = 0.0, hi = 0.0;
+  };
+  Range speed_mps;      // `speed`: mean wheel speed, weighted by distance [m/s]
+  Range spin_fraction;  // `spin_fraction`: sum |dR - dL| / sum (|dL| + |dR|), 0 lines .. 1 spins
+  Range length_m;       // `length`: mean wheel travel [m]
+  Range duration_s;     // `duration` [s]
+};
 
 struct Suite {
   std::string file;
@@ -53,6 +78,7 @@ struct Suite {
   Robot robot;  // the nominal model the user believes in
   MeasurementNoise measurement_noise;
   EffectList model_effects;
+  std::optional<Domain> model_domain;  // `model: domain:`, when the model was calibrated
   std::vector<SuiteExperiment> experiments;
 };
 
@@ -65,6 +91,8 @@ struct SuiteModel {
   /// The model order of every prediction (second_order.hpp): 2, exact in the heading noise, is
   /// the default of compare, fit and diagnose; 1 is the first-order engine.
   int order = 2;
+  /// Where the model was calibrated (calibrate's `domain`); none for a model given by hand.
+  std::optional<Domain> domain = std::nullopt;
 };
 SuiteModel suite_model(const Suite& suite);
 
@@ -72,7 +100,11 @@ SuiteModel suite_model(const Suite& suite);
 /// effects (measurement noise is not fitted, so it is left out). Pasted over a suite's own
 /// robot line and model block, it makes that suite use this model.
 std::string robot_yaml(const Robot& robot);
+/// The model block's lines: the robot line, then `model:` with the domain (when the model has
+/// one) and the effects.
 std::string model_yaml(const SuiteModel& model);
+/// The `domain: {speed: [lo, hi], spin_fraction: [..], length: [..], duration: [..]}` line.
+std::string domain_yaml(const Domain& domain);
 
 /// The odometry end pose of a run at `wheelbase_m`: its logged encoder travel integrated piece
 /// by piece, or the experiment's sampled path.

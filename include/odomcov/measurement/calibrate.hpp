@@ -1,0 +1,112 @@
+// calibrate: the whole loop of setting a model against measured runs. Diagnose, adopt the
+// effect that predicts runs it was not fitted on, repeat until nothing more does; then fit
+// everything jointly, say what the runs cannot separate and what to record next, record the
+// training domain, and (with held-out runs) judge the model on runs it never saw.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "odomcov/measurement/design.hpp"
+#include "odomcov/measurement/diagnosis.hpp"
+
+namespace odomcov {
+
+/// At most this many rounds by default: OptiOdom's loops end within 7.
+inline constexpr int kCalibrateRounds = 12;
+
+struct CalibrateOptions {
+  /// Each round's settings (alpha, the user's candidates, the fit path, cross-validation).
+  DiagnoseOptions diagnose;
+  /// Stop after this many rounds even if the last one adopted an effect.
+  int rounds = kCalibrateRounds;
+};
+
+/// A model judged on runs it was not fitted on.
+struct HoldoutSummary {
+  Comparison comparison;
+  ModelSummary summary;
+  std::size_t experiments = 0, consistent = 0;
+  /// The NEES mean per run by kind of experiment (SuiteExperiment::kind), in order of first
+  /// appearance.
+  std::vector<std::pair<std::string, double>> nees_by_kind;
+  /// "experiment: speed 0.104 m/s is above the training range ..." for every experiment
+  /// outside the model's training domain (extrapolation()).
+  std::vector<std::string> extrapolation;
+};
+
+/// The calibrated model as ROS 2's diff_drive_controller takes it (docs/calibrate.md):
+///  * wheel_separation_multiplier: the corrected odometry's effective wheelbase over the nominal
+///    (odometry_correction: the true wheelbase weighted by the rotation the training runs saw);
+///  * left_/right_wheel_radius_multiplier: each wheel's true travel per encoder metre;
+///  * pose_covariance_diagonal (x, y, z, roll, pitch, yaw): the model's covariance of the
+///    end-pose error after `pose_distance_m` of straight line at the training runs' median
+///    speed; z, roll and pitch kUnusedVariance, as 2-D publishers do;
+///  * twist_covariance_diagonal (vx, vy, vz, wx, wy, wz): the same over one controller period
+///    1/rate_hz, divided by the period squared (the variance of the speed and turn rate one
+///    update reports); vz, wx, wy kUnusedVariance.
+/// One multiplier cannot follow a correction that depends on the motion
+/// (turn_dependent_wheelbase): `motion_dependent` says so, and the values are the average over
+/// the training runs.
+struct DiffDriveParameters {
+  double wheel_separation_multiplier = 1.0;
+  double left_wheel_radius_multiplier = 1.0, right_wheel_radius_multiplier = 1.0;
+  std::vector<double> pose_covariance_diagonal, twist_covariance_diagonal;
+  bool motion_dependent = false;
+  double nominal_wheelbase_m = 0.0;
+  double speed_mps = 0.0;        // the speed the covariances are for
+  double pose_distance_m = 1.0;  // the distance the pose covariance is after
+  double rate_hz = 50.0;         // the controller's publish rate the twist covariance is for
+};
+/// The variance written for the axes a planar robot does not observe (z, roll, pitch), large
+/// so that a fusing filter (robot_localization) ignores them.
+inline constexpr double kUnusedVariance = 1e6;
+
+/// diff_drive_controller's parameters from a calibrated model and its training runs.
+DiffDriveParameters diff_drive_parameters(const Suite& suite, const SuiteModel& model);
+
+struct CalibrateResult {
+  std::vector<Diagnosis> rounds;
+  std::vector<std::string> named;  // the adopted candidates, in order
+  SuiteModel loop_model;           // the model after the last adoption (everything refitted)
+  /// The joint fit of every fitted parameter of the final model's effects (and the wheel
+  /// noise when wheel_noise_level was adopted) on the full likelihood.
+  FitResult joint;
+  /// True when the joint fit is the final model; false when it was not taken, and why.
+  bool joint_adopted = false;
+  std::string joint_note;
+  /// The final model, with its training domain (SuiteModel::domain).
+  SuiteModel model;
+  ModelSummary after;  // the final model against the training runs
+  bool explained = false;  // compare finds the final model consistent with the training runs
+  std::vector<ResidualAlignment> residuals;  // when not explained
+  std::optional<OdometryCorrection> odometry_correction;
+  std::vector<ConfoundedPair> confounded;
+  std::vector<NextExperiment> next_experiments;  // best first
+  DiffDriveParameters diff_drive;
+  std::optional<HoldoutSummary> holdout;
+};
+
+/// The loop on `suite` from `start`: diagnose rounds (each a DiagnoseOptions round, which
+/// adopts only a candidate that predicts its held-out folds better), until a round adopts
+/// nothing or `options.rounds` rounds; the joint fit (kept when no parameter ends at a bound
+/// and the NEES mean does not move further from 3 than the loop's model); compare, the
+/// residual alignment, the corrected odometry, the confounded pairs and the next experiments
+/// of the final model; its training domain; and, given `holdout` runs, the final model against
+/// them (with the holdout suite's measurement noise). Throws Cancelled when `progress->cancel`
+/// is set.
+CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
+                      const Suite* holdout = nullptr, DiagnoseProgress* progress = nullptr);
+
+/// The model against held-out runs: compare, the NEES per kind, and the experiments outside
+/// the model's training domain.
+HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha,
+                             const CalibrationOptions& calibration = {});
+
+/// The parameters calibrate's joint fit refits in a model: each effect's fitted ones
+/// (EffectInfo; group_variation's sd), and k_left, k_right when `noise_level`.
+std::vector<std::string> joint_parameters(const SuiteModel& model, bool noise_level);
+
+}  // namespace odomcov

@@ -1,0 +1,82 @@
+// What the experiments determine and what to record next: the pairs of fitted parameters the
+// suite does not separate (their estimates correlate), and a menu of standard experiments
+// ranked by the information each would add to the current model's (D-optimality), with the
+// standard errors to expect after it.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "odomcov/measurement/calibration.hpp"
+
+namespace odomcov {
+
+/// Estimates whose correlation exceeds this in magnitude are reported as confounded: at 0.9
+/// the standard error of either, given the other, is sqrt(1 - 0.81) = 0.44 of its own, so
+/// most of what the data say about one is said about the pair.
+inline constexpr double kConfoundedCorrelation = 0.9;
+
+struct ConfoundedPair {
+  std::string a, b;
+  double correlation = 0.0;
+};
+
+/// The pairs of parameters whose estimates correlate beyond kConfoundedCorrelation, from the
+/// estimates' covariance (a fit's, or the inverse of fisher_information), most correlated first.
+std::vector<ConfoundedPair> confounded_pairs(const std::vector<std::string>& names,
+                                             const Eigen::MatrixXd& covariance);
+
+/// The covariance of a fit's estimates for confounded_pairs: the fit's own (observed
+/// information) when it has one, else the inverse of the expected information at its model
+/// with a relative ridge of 1e-9 (a singular information: parameters the suite cannot tell
+/// apart at all, correlation +-1).
+Eigen::MatrixXd estimate_covariance(const Suite& suite, const FitResult& fit);
+
+/// In words: "these experiments do not separate scale_error.Es from
+/// turn_dependent_wheelbase.Eb_arc (correlation 0.97): ...".
+std::string confounded_text(const ConfoundedPair& pair);
+
+/// One experiment a lab could record next.
+struct MenuExperiment {
+  std::string name;       // e.g. "line-10m-0.3mps"
+  Path path;
+  std::string path_yaml;  // the suite's path block, one line, e.g. "{sample_rate: 50, speed: 0.3, segments: [{line: 10}]}"
+  std::int64_t runs = 0;
+};
+
+/// The standard menu for a suite: lines of 2, 5 and 10 m, a 3 m forward-back line, spins of
+/// +360, -360 and +1080 deg, arcs of radius 0.5, 1 and 2 m to the left and to the right (180
+/// deg), and UMBmark squares of 1 m driven CW and CCW; each at the suite's speed (the median
+/// of its runs' mean wheel speed; each distinct planned speed when there are at most three),
+/// at half the slowest and at twice the fastest; sampled at the suite's rate (its planned
+/// paths', else its logs' median); each with the median number of runs of the suite's
+/// experiments (at least 5).
+std::vector<MenuExperiment> experiment_menu(const Suite& suite);
+
+/// A menu experiment with what it would bring.
+struct NextExperiment {
+  MenuExperiment experiment;
+  /// 1/2 ln det(I + I_e) - 1/2 ln det(I) [nats]: the D-optimality gain, with I the current
+  /// information about the fitted parameters and I_e the experiment's.
+  double information_gain = 0.0;
+  /// The standard errors to expect after it, sqrt(diag((I + I_e)^-1)), by parameter name.
+  std::vector<std::pair<std::string, double>> expected_stderr;
+};
+
+/// The Fisher information of the fitted parameters `names` at `model`: of the runs of `suite`
+/// (runs of one group jointly: blockdiag(cov) + U U^T with group_variation's columns), or of a
+/// menu experiment of n runs as a new group. Central differences of the predicted means,
+/// covariances and group columns; Gaussian, I_kl = dmu_k' S^-1 dmu_l + tr(S^-1 dS_k S^-1 dS_l)/2.
+Eigen::MatrixXd fisher_information(const Suite& suite, const SuiteModel& model,
+                                   const std::vector<std::string>& names);
+
+/// The menu ranked by information_gain for the fit's parameters at its model (the current
+/// information: fisher_information of the suite), best first; experiments that add the same
+/// information as one ranked earlier (a speed the model does not depend on) are left out.
+std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit);
+
+}  // namespace odomcov

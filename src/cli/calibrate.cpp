@@ -1,0 +1,253 @@
+// odomcov calibrate SUITE.yaml --out DIR [--candidates FILE] [--holdout SUITE2 | --train REGEX
+//   [--test REGEX]] [--rounds N] [--alpha A] [--order 1|2] [--threads T] [--exact] [--json FILE]
+//   [--calibration automatic|gaussian|simulation] [--replicates B] [--seed S]
+// The whole loop: diagnose, adopt what predicts held-out folds, repeat, joint fit; writes
+// DIR/model.yaml, DIR/calibrate.json and DIR/diff_drive.yaml all at once (docs/calibrate.md).
+#include <tbb/global_control.h>
+
+#include <csignal>
+#include <iostream>
+#include <regex>
+#include <sstream>
+
+#include "commands.hpp"
+#include "calibrate_output.hpp"
+#include "odomcov/base/format.hpp"
+#include "odomcov/io/suite_io.hpp"
+#include "odomcov/measurement/calibrate.hpp"
+#include "output.hpp"
+#include "progress.hpp"
+#include "referee_options.hpp"
+
+namespace odomcov::cli {
+namespace {
+
+/// --rounds: at least one; more than 100 effects is not a model anyone can read.
+constexpr int kMaxRounds = 100;
+
+struct CalibrateCliOptions {
+  std::string suite, out, candidates, holdout, train, test, json;
+  int rounds = kCalibrateRounds;
+  double alpha = kDiagnoseAlpha;
+  int order = 2;
+  int threads = 0;
+  bool exact = false;
+  RefereeOptions referee;
+};
+
+/// Set by SIGINT: the library stops between two fits and nothing is written.
+DiagnoseProgress* g_progress = nullptr;
+extern "C" void on_calibrate_interrupt(int) {
+  if (g_progress) g_progress->cancel.store(true);
+}
+
+void check_options(const CalibrateCliOptions& opt) {
+  check_alpha(opt.alpha);
+  check_order(opt.order);
+  check_threads(opt.threads);
+  if (opt.rounds < 1 || opt.rounds > kMaxRounds) {
+    throw UsageError("--rounds must be in [1, " + std::to_string(kMaxRounds) + "]");
+  }
+  if (!opt.test.empty() && opt.train.empty()) throw UsageError("--test needs --train");
+  if (!opt.holdout.empty() && !opt.train.empty()) throw UsageError("give --holdout or --train, not both");
+  check_output_dir(opt.out);
+  if (!opt.json.empty()) check_output_path(opt.json);
+}
+
+std::regex regex_of(const std::string& option, const std::string& text) {
+  try {
+    return std::regex(text);
+  } catch (const std::regex_error& e) {
+    throw UsageError(option + ": not a regular expression: " + quote(text) + " (" + e.what() + ")");
+  }
+}
+
+/// The experiments of `suite` whose names match (`keep`) or do not match `pattern`.
+Suite select(const Suite& suite, const std::regex& pattern, bool keep) {
+  Suite out = suite;
+  out.experiments.clear();
+  for (const SuiteExperiment& ex : suite.experiments) {
+    if (std::regex_search(ex.name, pattern) == keep) out.experiments.push_back(ex);
+  }
+  return out;
+}
+
+/// The training suite and the held-out one (none without --holdout or --train).
+struct Inputs {
+  Suite train;
+  std::optional<Suite> held;
+};
+
+Inputs load_inputs(const CalibrateCliOptions& opt) {
+  Inputs in{load_suite(opt.suite), std::nullopt};
+  if (!opt.holdout.empty()) in.held = load_suite(opt.holdout);
+  if (opt.train.empty()) return in;
+  const Suite all = in.train;
+  const std::regex train = regex_of("--train", opt.train);
+  in.train = select(all, train, true);
+  in.held = opt.test.empty() ? select(all, train, false) : select(all, regex_of("--test", opt.test), true);
+  if (in.train.experiments.empty()) throw UsageError("--train " + quote(opt.train) + " matches no experiment of " + opt.suite);
+  if (in.held->experiments.empty()) throw UsageError("no experiment of " + opt.suite + " is left to test on");
+  return in;
+}
+
+std::string number(double v, const char* format = "%.6g") { return format_number(v, format); }
+
+// ---- The report --------------------------------------------------------------------------------
+
+void write_rounds(std::ostream& out, const CalibrateResult& c) {
+  out << "Rounds (each adopts the best candidate that predicts its held-out folds better):\n";
+  for (std::size_t r = 0; r < c.rounds.size(); ++r) {
+    const Diagnosis& d = c.rounds[r];
+    out << "  round " << r + 1 << ": ";
+    if (!d.best) {
+      out << "nothing adopted (NEES mean " << fixed(d.before.nees_mean, 3) << ", " << d.before.verdict << ")\n";
+    } else {
+      const Candidate& b = d.candidates[*d.best];
+      out << b.effect << " (d logL " << fixed(b.delta_log_likelihood, 1) << " in-sample, "
+          << (std::isfinite(b.delta_held_out) ? fixed(b.delta_held_out, 1) : std::string("-"))
+          << " held out); NEES mean " << fixed(d.before.nees_mean, 3) << " -> " << fixed(d.after.nees_mean, 3) << "\n";
+    }
+    for (const Candidate& x : d.candidates) {
+      if (x.verdict == "adopted" || x.decision.empty()) continue;
+      out << "    - " << x.effect << ": " << x.decision << "\n";
+    }
+  }
+}
+
+void write_model(std::ostream& out, const CalibrateResult& c) {
+  out << "\nJoint fit of everything named (full likelihood): " << c.joint_note << "\n";
+  for (std::size_t i = 0; i < c.joint.names.size(); ++i) {
+    const auto k = static_cast<Eigen::Index>(i);
+    out << "  " << c.joint.names[i] << " = " << number(c.joint.values(k))
+        << (std::isfinite(c.joint.stderrs(k)) ? " +/- " + sci(c.joint.stderrs(k), 2) : std::string(" (no standard error)"))
+        << "\n";
+  }
+  out << "\nThe calibrated model (model.yaml; paste over a suite's robot line and model block):\n"
+      << model_yaml(c.model) << "against the training runs: log-likelihood " << fixed(c.after.log_likelihood, 2)
+      << ", NEES mean " << fixed(c.after.nees_mean, 3) << ", " << c.after.verdict << "\n";
+}
+
+void write_verdict(std::ostream& out, const CalibrateResult& c, double alpha) {
+  if (c.explained) {
+    out << "\nThe final model is consistent with the training runs (compare at alpha = " << alpha << ").\n";
+    return;
+  }
+  out << "\nThe final model is still inconsistent with the training runs (compare at alpha = " << alpha
+      << ", NEES mean " << fixed(c.after.nees_mean, 3) << " against 3): something the candidates do not cover is missing.\n";
+  std::size_t shown = 0;
+  for (const ResidualAlignment& a : c.residuals) {
+    if (!a.testable || shown == 3 || (shown > 0 && !(a.p_value < alpha))) break;
+    out << (shown == 0 ? "The remaining misfit lines up with:\n" : "") << "  " << a.feature
+        << " (p = " << format_number(a.p_value, "%.2g") << "): " << a.description << "\n";
+    ++shown;
+  }
+}
+
+void write_holdout(std::ostream& out, const HoldoutSummary& h) {
+  out << "\nHeld-out runs (never seen by the loop): NEES mean " << fixed(h.summary.nees_mean, 3) << ", "
+      << h.consistent << " of " << h.experiments << " experiments consistent, " << h.summary.verdict << "\n  NEES by kind:";
+  for (const auto& [kind, nees] : h.nees_by_kind) out << " " << kind << " " << fixed(nees, 2);
+  out << "\n";
+  if (h.extrapolation.empty()) {
+    out << "  every held-out experiment lies inside the training domain\n";
+    return;
+  }
+  out << "  outside the training domain (the model extrapolates):\n";
+  for (const std::string& x : h.extrapolation) out << "    " << x << "\n";
+}
+
+std::string report(const Suite& suite, const CalibrateResult& c, double alpha) {
+  std::ostringstream out;
+  std::size_t runs = 0;
+  for (const SuiteExperiment& ex : suite.experiments) runs += ex.runs.size();
+  out << "odomcov calibrate: " << suite.name << " (" << suite.experiments.size() << " experiments, " << runs
+      << " runs), family-wise alpha = " << alpha << " per round\n";
+  if (!c.rounds.empty()) out << "cross-validation: " << folds_text(c.rounds.front().folds) << "\n\n";
+  write_rounds(out, c);
+  write_model(out, c);
+  write_verdict(out, c, alpha);
+  write_correction(out, c.odometry_correction);
+  out << design_report(c.confounded, c.next_experiments);
+  if (c.holdout) write_holdout(out, *c.holdout);
+  return out.str();
+}
+
+// ---- The files ---------------------------------------------------------------------------------
+
+/// Every file of DIR, written at once (StagedDir: nothing half-written). Ctrl-C waits until
+/// the files are in place.
+void write_outputs(const CalibrateCliOptions& opt, const Suite& suite, const CalibrateResult& c, const json& doc) {
+  StagedDir stage(opt.out);
+  stage.write("model.yaml", "# The model odomcov calibrate built from " + suite.name + " (docs/calibrate.md).\n" +
+                                model_yaml(c.model));
+  stage.write("calibrate.json", doc.dump(1) + "\n");
+  stage.write("diff_drive.yaml", diff_drive_yaml(suite, c.diff_drive));
+  stage.commit();
+  if (!opt.json.empty()) write_json_atomic(opt.json, doc);
+}
+
+int run_calibrate(const CalibrateCliOptions& opt) {
+  check_options(opt);
+  const Inputs in = load_inputs(opt);
+  CalibrateOptions options;
+  options.rounds = opt.rounds;
+  options.diagnose.alpha = opt.alpha;
+  options.diagnose.path = opt.exact ? FitPath::exact : FitPath::fast;
+  options.diagnose.calibration = calibration_options(opt.referee, nullptr);
+  options.diagnose.candidates = load_candidates(opt.candidates, in.train);
+  for (const Suite* s : {&in.train, in.held ? &*in.held : nullptr}) {
+    if (s) check_second_order_size(*s, opt.order);
+  }
+  SuiteModel start = suite_model(in.train);
+  start.order = opt.order;
+  check_finite_start(in.train, start, "calibration");
+  std::optional<tbb::global_control> threads;
+  if (opt.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(opt.threads));
+  DiagnoseProgress progress;
+  g_progress = &progress;
+  auto previous = std::signal(SIGINT, on_calibrate_interrupt);
+  ProgressBar bar([&progress] { return progress.fits_done.load(); },
+                  std::function<std::int64_t()>([&progress] { return progress.fits_total.load(); }),
+                  [&progress] { return "fits, round " + std::to_string(progress.round.load()); });
+  std::optional<CalibrateResult> c;
+  try {
+    c = calibrate(in.train, start, options, in.held ? &*in.held : nullptr, &progress);
+  } catch (const Cancelled&) {
+    bar.finish();
+    std::signal(SIGINT, previous);
+    std::cerr << "odomcov: interrupted; nothing was written\n";
+    return 130;
+  }
+  bar.finish();
+  write_outputs(opt, in.train, *c, calibrate_json(in.train, start, *c, opt.alpha,
+                                     c->holdout ? comparison_json(*in.held, c->holdout->comparison) : json(nullptr)));
+  std::signal(SIGINT, previous);
+  std::cout << report(in.train, *c, opt.alpha) << "\nWrote " << opt.out << "/model.yaml, calibrate.json and diff_drive.yaml\n";
+  return kExitOk;
+}
+
+}  // namespace
+
+void setup_calibrate(CLI::App& app, int& exit_code) {
+  auto opt = std::make_shared<CalibrateCliOptions>();
+  CLI::App* cmd = app.add_subcommand("calibrate", "The whole loop: diagnose, adopt what predicts held-out runs, repeat, joint fit");
+  cmd->add_option("suite", opt->suite, "Measurement suite (YAML)")->required();
+  cmd->add_option("--out", opt->out, "Directory for model.yaml, calibrate.json and diff_drive.yaml")->required();
+  cmd->add_option("--candidates", opt->candidates,
+                  "YAML list of your own candidate effects (custom, or catalogue ones with starting values)");
+  cmd->add_option("--holdout", opt->holdout, "Another suite of runs to judge the final model on");
+  cmd->add_option("--train", opt->train, "Calibrate on the experiments whose names match this regular expression");
+  cmd->add_option("--test", opt->test, "With --train: judge on the experiments matching this (default: the others)");
+  cmd->add_option("--rounds", opt->rounds, "At most this many rounds")->capture_default_str();
+  cmd->add_option("--alpha", opt->alpha, "Family-wise significance level over each round's candidates")->capture_default_str();
+  cmd->add_option("--order", opt->order, "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
+      ->capture_default_str();
+  cmd->add_option("--threads", opt->threads, "Worker threads; 0 = all cores")->capture_default_str();
+  add_referee_options(cmd, opt->referee);
+  cmd->add_option("--json", opt->json, "Also write calibrate.json to this file");
+  cmd->add_flag("--exact", opt->exact, "Every fit on the exact path (slow; the reference)");
+  cmd->callback([opt, &exit_code] { exit_code = run_calibrate(*opt); });
+}
+
+}  // namespace odomcov::cli

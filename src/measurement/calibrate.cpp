@@ -1,0 +1,188 @@
+#include "odomcov/measurement/calibrate.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "odomcov/base/format.hpp"
+#include "odomcov/measurement/domain.hpp"
+#include "odomcov/measurement/residual_features.hpp"
+
+namespace odomcov {
+namespace {
+
+/// The diagnose rounds: each adopts at most one candidate; the loop stops when one adopts
+/// nothing or after `rounds`.
+void run_rounds(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
+                DiagnoseProgress* progress, CalibrateResult& out) {
+  SuiteModel model = start;
+  for (int round = 0; round < options.rounds; ++round) {
+    if (progress) progress->round = round + 1;
+    out.rounds.push_back(diagnose(suite, model, options.diagnose, progress));
+    const Diagnosis& d = out.rounds.back();
+    if (!d.best) break;
+    out.named.push_back(d.candidates[*d.best].effect);
+    model = d.candidates[*d.best].model;
+  }
+  out.loop_model = model;
+}
+
+bool named_noise_level(const std::vector<std::string>& named) {
+  return std::find(named.begin(), named.end(), kWheelNoiseLevel) != named.end();
+}
+
+/// The joint fit of everything in the loop's model, on the full likelihood; kept as the final
+/// model unless a parameter ends at a bound or the NEES mean moves further from 3 than the
+/// loop's model has it (moves_nees_away).
+void joint_fit(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
+               CalibrateResult& out) {
+  const std::vector<std::string> names = joint_parameters(out.loop_model, named_noise_level(out.named));
+  out.model = out.loop_model;
+  if (names.empty()) {
+    out.joint_note = "nothing to fit";
+    return;
+  }
+  ResidualCache cache(suite);
+  std::atomic<std::int64_t>* counter = progress ? &progress->evaluations : nullptr;
+  const FitResult fast = fit(suite, out.loop_model, names, Likelihood::full, counter, options.diagnose.path, &cache);
+  out.joint = refit_exactly(fast, names, Likelihood::full, counter, cache);
+  if (!out.joint.at_bound.empty()) {
+    out.joint_note = "not taken: the joint fit leaves parameters at a bound of their range";
+    for (const std::string& p : out.joint.at_bound) out.joint_note += (p == out.joint.at_bound.front() ? " (" : ", ") + p;
+    out.joint_note += "); the loop's model stands";
+    return;
+  }
+  // Only the NEES means are read: the Gaussian reference (no referee replicates) is enough.
+  const double alpha = options.diagnose.alpha;
+  CalibrationOptions gaussian;
+  gaussian.method = CalibrationMethod::gaussian;
+  const ModelSummary loop = summarise(compare(suite, out.loop_model, alpha, cache.at(out.loop_model), gaussian));
+  const ModelSummary joint = summarise(compare(suite, out.joint.model, alpha, cache.at(out.joint.model), gaussian));
+  std::size_t runs = 0;
+  for (const SuiteExperiment& ex : suite.experiments) runs += ex.runs.size();
+  if (moves_nees_away(loop, joint, runs)) {
+    out.joint_note = "not taken: it moves the NEES mean from " + format_number(loop.nees_mean, "%.3g") + " to " +
+                     format_number(joint.nees_mean, "%.3g") + ", further from 3; the loop's model stands";
+    return;
+  }
+  out.joint_adopted = true;
+  out.model = out.joint.model;
+  out.joint_note = "taken: log-likelihood " + format_number(loop.log_likelihood, "%.6g") + " -> " +
+                   format_number(joint.log_likelihood, "%.6g");
+}
+
+/// The final model's account: compare, residuals, corrected odometry, what the runs cannot
+/// separate and what to record next.
+void account(const Suite& suite, const CalibrateOptions& options, CalibrateResult& out) {
+  const Comparison c = compare(suite, out.model, options.diagnose.alpha, options.diagnose.calibration);
+  out.after = summarise(c);
+  out.explained = c.verdict.consistent();
+  if (!out.explained) out.residuals = residual_alignment(suite, out.model, residuals(suite, out.model));
+  out.odometry_correction = odometry_correction(suite, out.model);
+  if (out.joint.names.empty()) return;
+  FitResult at_final = out.joint;
+  at_final.model = out.model;
+  out.confounded = confounded_pairs(out.joint.names, estimate_covariance(suite, at_final));
+  out.next_experiments = next_experiments(suite, at_final);
+}
+
+/// The model's covariance of the end-pose error after `length_m` of straight line at
+/// `speed_mps`, sampled at `rate_hz` (no measurement noise).
+Matrix3 line_covariance(const Suite& suite, SuiteModel model, double length_m, double speed_mps, double rate_hz) {
+  Suite line = suite;
+  line.experiments.clear();
+  SuiteExperiment ex;
+  ex.name = "line";
+  ex.path.sample_rate_hz = rate_hz;
+  ex.path.keyframes = keyframes_from_segments({{PathSegment::Kind::line, length_m, 0.0, 0.0}},
+                                              model.robot.wheelbase_m, speed_mps);
+  ex.runs.push_back({"1", Vector3::Zero(), {}, {}});
+  line.experiments.push_back(std::move(ex));
+  model.measurement_noise = {};
+  const RunResidual r = residuals(line, model)[0][0];
+  return r.cov + r.group_column * r.group_column.transpose() + r.group_column2 * r.group_column2.transpose();
+}
+
+/// The median of the training runs' mean wheel speeds.
+double median_speed(const Suite& suite) {
+  std::vector<double> v;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    for (const SuiteRun& run : ex.runs) v.push_back(path_features(ex, run, suite.robot.wheelbase_m).speed_mps);
+  }
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+}  // namespace
+
+DiffDriveParameters diff_drive_parameters(const Suite& suite, const SuiteModel& model) {
+  DiffDriveParameters p;
+  p.nominal_wheelbase_m = model.robot.wheelbase_m;
+  if (const auto c = odometry_correction(suite, model)) {
+    p.wheel_separation_multiplier = c->parameters.wheelbase_m / model.robot.wheelbase_m;
+    p.left_wheel_radius_multiplier = c->parameters.scale_left;
+    p.right_wheel_radius_multiplier = c->parameters.scale_right;
+    p.motion_dependent = c->motion_dependent;
+  }
+  p.speed_mps = median_speed(suite);
+  if (!(p.speed_mps > 0)) p.speed_mps = 0.1;  // nothing moved: any speed, the covariance is per distance
+  const Matrix3 pose = line_covariance(suite, model, p.pose_distance_m, p.speed_mps, p.rate_hz);
+  const double period = 1.0 / p.rate_hz;
+  const Matrix3 step = line_covariance(suite, model, p.speed_mps * period, p.speed_mps, p.rate_hz) / (period * period);
+  p.pose_covariance_diagonal = {pose(0, 0), pose(1, 1), kUnusedVariance, kUnusedVariance, kUnusedVariance, pose(2, 2)};
+  p.twist_covariance_diagonal = {step(0, 0), step(1, 1), kUnusedVariance, kUnusedVariance, kUnusedVariance, step(2, 2)};
+  return p;
+}
+
+std::vector<std::string> joint_parameters(const SuiteModel& model, bool noise_level) {
+  std::vector<std::string> names;
+  for (const EffectSpec& e : model.effects) {
+    const std::vector<std::string> fitted = effect_candidate(*info_of(e)).fitted;
+    names.insert(names.end(), fitted.begin(), fitted.end());
+  }
+  if (noise_level) {
+    names.emplace_back("k_left");
+    names.emplace_back("k_right");
+  }
+  return names;
+}
+
+HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha,
+                             const CalibrationOptions& calibration) {
+  HoldoutSummary out;
+  out.comparison = compare(holdout, model, alpha, calibration);
+  out.summary = summarise(out.comparison);
+  std::vector<std::string> kinds;
+  std::map<std::string, std::pair<double, double>> nees;  // kind -> (sum of NEES, runs)
+  for (std::size_t e = 0; e < holdout.experiments.size(); ++e) {
+    const ExperimentComparison& c = out.comparison.experiments[e];
+    const std::string kind = experiment_kind(holdout.experiments[e]);
+    if (!nees.count(kind)) kinds.push_back(kind);
+    nees[kind].first += c.nees_mean * static_cast<double>(c.n);
+    nees[kind].second += static_cast<double>(c.n);
+    ++out.experiments;
+    out.consistent += c.verdict.consistent();
+    for (const std::string& x : c.extrapolation) out.extrapolation.push_back(c.name + ": " + x);
+  }
+  for (const std::string& k : kinds) out.nees_by_kind.push_back({k, nees[k].first / nees[k].second});
+  return out;
+}
+
+CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
+                      const Suite* holdout, DiagnoseProgress* progress) {
+  CalibrateResult out;
+  run_rounds(suite, start, options, progress, out);
+  if (progress && progress->cancel.load()) throw Cancelled();
+  joint_fit(suite, options, progress, out);
+  account(suite, options, out);
+  out.model.domain = training_domain(suite, out.model.robot.wheelbase_m);
+  out.diff_drive = diff_drive_parameters(suite, out.model);
+  if (holdout) {
+    SuiteModel judged = out.model;
+    judged.measurement_noise = holdout->measurement_noise;
+    out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha, options.diagnose.calibration);
+  }
+  return out;
+}
+
+}  // namespace odomcov

@@ -1,0 +1,109 @@
+#include "odomcov/measurement/cross_validation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+namespace odomcov {
+namespace {
+
+/// Each experiment's label by `key` (kind or group), the distinct labels in order of first
+/// appearance, and the experiments' indices into them.
+struct Labels {
+  std::vector<std::string> distinct;
+  std::vector<int> of_experiment;
+};
+template <class Key>
+Labels labels_of(const Suite& suite, Key key) {
+  Labels out;
+  std::map<std::string, int> index;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    const std::string label = key(ex);
+    const auto [it, added] = index.emplace(label, static_cast<int>(out.distinct.size()));
+    if (added) out.distinct.push_back(label);
+    out.of_experiment.push_back(it->second);
+  }
+  return out;
+}
+
+/// Folds from labels: one per label, or kMaxFolds shared round robin when there are more.
+Folds folds_of(const std::string& by, const Labels& labels) {
+  Folds f;
+  f.by = by;
+  const std::size_t count = std::min(labels.distinct.size(), kMaxFolds);
+  f.names.assign(count, "");
+  for (std::size_t l = 0; l < labels.distinct.size(); ++l) {
+    std::string& name = f.names[l % count];
+    name += (name.empty() ? "" : "+") + labels.distinct[l];
+  }
+  for (int l : labels.of_experiment) f.of_experiment.push_back(static_cast<int>(static_cast<std::size_t>(l) % count));
+  return f;
+}
+
+/// The standard errors of `own` in a fit (NaN where it has none or lacks the name).
+std::vector<double> stderrs_of(const FitResult& fit, const std::vector<std::string>& own) {
+  std::vector<double> out;
+  for (const std::string& name : own) {
+    const auto at = std::find(fit.names.begin(), fit.names.end(), name);
+    out.push_back(at == fit.names.end() ? std::numeric_limits<double>::quiet_NaN()
+                                        : fit.stderrs(static_cast<Eigen::Index>(at - fit.names.begin())));
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<bool> Folds::training(std::size_t fold) const {
+  std::vector<bool> keep;
+  for (int f : of_experiment) keep.push_back(static_cast<std::size_t>(f) != fold);
+  return keep;
+}
+
+Folds make_folds(const Suite& suite) {
+  const Labels kinds = labels_of(suite, [](const SuiteExperiment& ex) { return experiment_kind(ex); });
+  if (kinds.distinct.size() >= kMinKindFolds) return folds_of("kind", kinds);
+  const Labels groups = labels_of(suite, [](const SuiteExperiment& ex) { return ex.group; });
+  const bool grouped = std::none_of(suite.experiments.begin(), suite.experiments.end(),
+                                    [](const SuiteExperiment& ex) { return ex.group.empty(); });
+  if (grouped && groups.distinct.size() >= 2) return folds_of("group", groups);
+  return experiment_folds(suite);
+}
+
+Folds experiment_folds(const Suite& suite) {
+  if (suite.experiments.size() < 2) return {};
+  const Labels each = labels_of(suite, [](const SuiteExperiment& ex) { return ex.name; });
+  return folds_of("experiments", each);
+}
+
+double log_likelihood_of(const std::vector<std::vector<RunResidual>>& residuals, Likelihood kind) {
+  return kind == Likelihood::full ? log_likelihood(residuals) : scatter_log_likelihood(residuals);
+}
+
+FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& start,
+                   const std::vector<std::string>& names, const std::vector<std::string>& own,
+                   Likelihood kind, std::atomic<std::int64_t>* evaluations, FitPath path) {
+  FoldFits out;
+  for (std::size_t f = 0; f < folds.size(); ++f) {
+    if (names.empty()) {
+      out.models.push_back(start);
+      out.own_stderrs.emplace_back();
+      continue;
+    }
+    ResidualCache view(cache, folds.training(f));
+    const FitResult first = fit(cache.suite(), start, names, kind, evaluations, path, &view);
+    // The exact refit moves the candidate's own parameters; the base (no own ones) its whole
+    // fit, so that neither side of a held-out comparison rests on the fast path alone.
+    const FitResult r = refit_exactly(first, own.empty() ? names : own, kind, evaluations, view);
+    out.models.push_back(r.model);
+    out.own_stderrs.push_back(stderrs_of(r, own));
+  }
+  return out;
+}
+
+double held_out_log_likelihood(const std::vector<std::vector<RunResidual>>& all,
+                               const std::vector<bool>& training, Likelihood kind) {
+  return log_likelihood_of(all, kind) - log_likelihood_of(select_experiments(all, training), kind);
+}
+
+}  // namespace odomcov

@@ -1,0 +1,409 @@
+#include "odomcov/measurement/design.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "odomcov/base/format.hpp"
+#include "odomcov/measurement/likelihood.hpp"
+#include "odomcov/measurement/residual_features.hpp"
+
+namespace odomcov {
+namespace {
+
+using Residuals = std::vector<std::vector<RunResidual>>;
+
+/// The central-difference step of a fitted value: a ten-thousandth of its size (at least of
+/// 1e-3, so that a parameter at 0 still moves), and whether v - h is still a valid value (else
+/// a forward difference).
+struct Step {
+  double h = 0.0;
+  bool central = true;
+};
+
+bool valid_value(SuiteModel model, const std::string& name, double v) {
+  fitted_parameter(model, name) = v;
+  if (model.robot.noise.k_left < 0 || model.robot.noise.k_right < 0 || !(model.robot.wheelbase_m > 0)) return false;
+  for (const EffectSpec& e : model.effects) {
+    if (!check_effect(e).empty()) return false;
+  }
+  return true;
+}
+
+Step step_of(const SuiteModel& model, const std::string& name) {
+  SuiteModel m = model;
+  const double v = fitted_parameter(m, name);
+  const double h = 1e-4 * std::max(std::abs(v), 1e-3);
+  return {h, valid_value(model, name, v - h)};
+}
+
+/// The residuals of `suite` at the model and, per fitted parameter, at v + h and v - h (or
+/// v + 2h for a forward difference): their derivatives come from these.
+struct Sensitivities {
+  Residuals at;
+  std::vector<Residuals> plus, minus;
+  std::vector<Step> steps;
+};
+
+Sensitivities sensitivities(const Suite& suite, const SuiteModel& model, const std::vector<std::string>& names) {
+  Sensitivities s;
+  s.at = residuals(suite, model);
+  for (const std::string& name : names) {
+    const Step step = step_of(model, name);
+    SuiteModel m = model;
+    const double v = fitted_parameter(m, name);
+    fitted_parameter(m, name) = v + step.h;
+    s.plus.push_back(residuals(suite, m));
+    fitted_parameter(m, name) = step.central ? v - step.h : v;
+    s.minus.push_back(step.central ? residuals(suite, m) : s.at);
+    s.steps.push_back(step);
+  }
+  return s;
+}
+
+/// A run's residual r = error - mean, covariance S and group columns U, stacked for a set of
+/// runs: dense vectors and matrices in 3-row blocks.
+struct Stacked {
+  Eigen::VectorXd r;
+  Eigen::MatrixXd S, U;
+};
+
+Stacked stack(const std::vector<const RunResidual*>& runs) {
+  const auto n = static_cast<Eigen::Index>(runs.size());
+  Stacked out{Eigen::VectorXd(3 * n), Eigen::MatrixXd::Zero(3 * n, 3 * n), Eigen::MatrixXd(3 * n, 2)};
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const RunResidual& run = *runs[static_cast<std::size_t>(i)];
+    out.r.segment<3>(3 * i) = run.error - run.mean;
+    out.S.block<3, 3>(3 * i, 3 * i) = run.cov;
+    out.U.block<3, 1>(3 * i, 0) = run.group_column;
+    out.U.block<3, 1>(3 * i, 1) = run.group_column2;
+  }
+  return out;
+}
+
+/// The Gaussian Fisher information of a stacked set of runs with covariance C = S + U U^T (the
+/// U term only when `grouped`), from the sets at v + h and v - h per parameter:
+///   I_kl = dr_k' C^-1 dr_l + tr(C^-1 dC_k C^-1 dC_l) / 2.
+Eigen::MatrixXd information_of(const Stacked& at, const std::vector<Stacked>& plus,
+                               const std::vector<Stacked>& minus, const std::vector<double>& width,
+                               bool grouped) {
+  const std::size_t n = plus.size();
+  auto cov = [grouped](const Stacked& s) -> Eigen::MatrixXd {
+    return grouped ? Eigen::MatrixXd(s.S + s.U * s.U.transpose()) : s.S;
+  };
+  const Eigen::LDLT<Eigen::MatrixXd> C(cov(at));
+  std::vector<Eigen::VectorXd> dr(n);
+  std::vector<Eigen::MatrixXd> CdC(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    dr[k] = (plus[k].r - minus[k].r) / width[k];
+    CdC[k] = C.solve((cov(plus[k]) - cov(minus[k])) / width[k]);
+  }
+  Eigen::MatrixXd I(n, n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::VectorXd Cdr = C.solve(dr[k]);
+    for (std::size_t l = 0; l <= k; ++l) {
+      const double trace = (CdC[k].array() * CdC[l].transpose().array()).sum();
+      I(k, l) = I(l, k) = dr[l].dot(Cdr) + 0.5 * trace;
+    }
+  }
+  return I;
+}
+
+/// The runs of each group (RunResidual::group) of a set of residuals, in order.
+std::map<int, std::vector<std::pair<std::size_t, std::size_t>>> runs_by_group(const Residuals& res) {
+  std::map<int, std::vector<std::pair<std::size_t, std::size_t>>> out;
+  for (std::size_t e = 0; e < res.size(); ++e) {
+    for (std::size_t r = 0; r < res[e].size(); ++r) out[res[e][r].group].push_back({e, r});
+  }
+  return out;
+}
+
+bool has_group_columns(const Residuals& res) {
+  for (const auto& ex : res) {
+    for (const RunResidual& r : ex) {
+      if (!r.group_column.isZero(0.0) || !r.group_column2.isZero(0.0)) return true;
+    }
+  }
+  return false;
+}
+
+/// The information of one set of runs (a group, or a single run) from the sensitivities.
+Eigen::MatrixXd information_of_runs(const Sensitivities& s, const std::vector<std::pair<std::size_t, std::size_t>>& runs,
+                                    bool grouped) {
+  auto pick = [&](const Residuals& res) {
+    std::vector<const RunResidual*> out;
+    for (const auto& [e, r] : runs) out.push_back(&res[e][r]);
+    return stack(out);
+  };
+  std::vector<Stacked> plus, minus;
+  std::vector<double> width;
+  for (std::size_t k = 0; k < s.plus.size(); ++k) {
+    plus.push_back(pick(s.plus[k]));
+    minus.push_back(pick(s.minus[k]));
+    width.push_back(s.steps[k].central ? 2 * s.steps[k].h : s.steps[k].h);
+  }
+  return information_of(pick(s.at), plus, minus, width, grouped);
+}
+
+/// The information of the runs of a suite from their sensitivities: each group's runs jointly
+/// when the model correlates them, each run alone otherwise.
+Eigen::MatrixXd information(const Sensitivities& s) {
+  const auto n = static_cast<Eigen::Index>(s.plus.size());
+  Eigen::MatrixXd I = Eigen::MatrixXd::Zero(n, n);
+  const bool grouped = has_group_columns(s.at);
+  for (const auto& [group, runs] : runs_by_group(s.at)) {
+    if (grouped) {
+      I += information_of_runs(s, runs, true);
+      continue;
+    }
+    for (const auto& run : runs) I += information_of_runs(s, {run}, false);
+  }
+  return I;
+}
+
+/// The information of n runs of one planned experiment as a new group: its runs' mean has
+/// covariance S/n + U U^T, and their scatter about it is Wishart(S, n - 1), independent of it:
+///   I = I_mean(S/n + U U^T) + (n - 1) I_scatter(S).
+Eigen::MatrixXd information_of_experiment(const Sensitivities& s, std::size_t experiment, std::int64_t runs) {
+  const double n = static_cast<double>(runs);
+  auto pick = [&](const Residuals& res, bool mean) {
+    Stacked out = stack({&res[experiment][0]});
+    if (mean) {
+      out.S /= n;
+    } else {
+      out.U.setZero();
+    }
+    return out;
+  };
+  Eigen::MatrixXd total;
+  for (const bool mean : {true, false}) {
+    std::vector<Stacked> plus, minus;
+    std::vector<double> width;
+    for (std::size_t k = 0; k < s.plus.size(); ++k) {
+      plus.push_back(pick(s.plus[k], mean));
+      minus.push_back(pick(s.minus[k], mean));
+      width.push_back(s.steps[k].central ? 2 * s.steps[k].h : s.steps[k].h);
+    }
+    Stacked at = pick(s.at, mean);
+    if (!mean) {  // the scatter carries no mean information
+      at.r.setZero();
+      for (auto* list : {&plus, &minus}) {
+        for (Stacked& x : *list) x.r.setZero();
+      }
+    }
+    const Eigen::MatrixXd I = information_of(at, plus, minus, width, mean);
+    total = mean ? I : Eigen::MatrixXd(total + (n - 1) * I);
+  }
+  return total;
+}
+
+// ---- The menu ---------------------------------------------------------------------------------
+
+/// The suite's sample rate: its first planned path's, else the median of its logs' 1/duration.
+double sample_rate_of(const Suite& suite) {
+  std::vector<double> rates;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    if (!ex.logged) return ex.path.sample_rate_hz;
+    for (const SuiteRun& run : ex.runs) {
+      for (double d : run.durations_s) rates.push_back(1.0 / d);
+    }
+  }
+  if (rates.empty()) return 50.0;
+  std::nth_element(rates.begin(), rates.begin() + static_cast<std::ptrdiff_t>(rates.size() / 2), rates.end());
+  return rates[rates.size() / 2];
+}
+
+double median(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+/// A planned path's `speed`: its faster wheel's speed, the largest over its intervals.
+double planned_speed(const Path& path) {
+  double v = 0.0;
+  for (std::size_t i = 0; i < path.interval_count(); ++i) {
+    const ArcSegment a = path.interval(i);
+    const double dt = path.keyframes[i + 1].t_s - path.keyframes[i].t_s;
+    v = std::max(v, std::max(std::abs(a.left_m), std::abs(a.right_m)) / dt);
+  }
+  return v;
+}
+
+/// The suite's speeds (the menu's `speed`, its faster wheel's): its planned experiments'
+/// distinct speeds (3 significant digits) when every experiment is planned and there are at
+/// most three, else the median run speed (mean wheel speed); then half the slowest and twice
+/// the fastest (in this order, so that among menu experiments that add the same information
+/// the suite's own speed comes first).
+std::vector<double> speeds_of(const Suite& suite) {
+  std::set<double> planned;
+  std::vector<double> runs;
+  bool logged = false;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    logged = logged || ex.logged;
+    if (!ex.logged) planned.insert(std::stod(format_number(planned_speed(ex.path), "%.3g")));
+    for (const SuiteRun& run : ex.runs) runs.push_back(path_features(ex, run, suite.robot.wheelbase_m).speed_mps);
+  }
+  std::vector<double> speeds(planned.begin(), planned.end());
+  if (logged || speeds.empty() || speeds.size() > 3) speeds = {std::stod(format_number(median(runs), "%.3g"))};
+  const double slow = 0.5 * speeds.front(), fast = 2.0 * speeds.back();
+  speeds.push_back(slow);  // the suite's own speeds first: they win ties
+  speeds.push_back(fast);
+  return speeds;
+}
+
+std::int64_t runs_of(const Suite& suite) {
+  std::vector<double> counts;
+  for (const SuiteExperiment& ex : suite.experiments) counts.push_back(static_cast<double>(ex.runs.size()));
+  return std::max<std::int64_t>(5, static_cast<std::int64_t>(median(counts)));
+}
+
+/// One menu entry: a name, its segments (as the suite's path block writes them) and the
+/// segments themselves.
+struct Recipe {
+  std::string name;
+  std::string segments_yaml;
+  std::vector<PathSegment> segments;
+};
+
+PathSegment line(double d) { return {PathSegment::Kind::line, d, 0.0, 0.0}; }
+PathSegment turn(double deg) { return {PathSegment::Kind::turn, 0.0, deg * M_PI / 180.0, 0.0}; }
+PathSegment arc(double r, double deg) { return {PathSegment::Kind::arc, 0.0, deg * M_PI / 180.0, r}; }
+
+std::vector<Recipe> recipes() {
+  std::vector<Recipe> out;
+  for (double d : {2.0, 5.0, 10.0}) {
+    out.push_back({"line-" + format_number(d) + "m", "{line: " + format_number(d) + "}", {line(d)}});
+  }
+  out.push_back({"forward-back-3m", "{line: 3}, {line: -3}", {line(3), line(-3)}});
+  for (double deg : {360.0, -360.0, 1080.0}) {
+    out.push_back({std::string(deg > 0 ? "spin-ccw-" : "spin-cw-") + format_number(std::abs(deg)),
+                   "{turn_deg: " + format_number(deg) + "}", {turn(deg)}});
+  }
+  for (double r : {0.5, 1.0, 2.0}) {
+    for (double side : {1.0, -1.0}) {
+      out.push_back({std::string(side > 0 ? "arc-left-r" : "arc-right-r") + format_number(r),
+                     "{arc: {radius: " + format_number(side * r) + ", angle_deg: " + format_number(side * 180) + "}}",
+                     {arc(side * r, side * 180)}});
+    }
+  }
+  for (double side : {-90.0, 90.0}) {
+    Recipe square{side < 0 ? "umbmark-cw-1m" : "umbmark-ccw-1m", "", {}};
+    for (int i = 0; i < 4; ++i) {
+      square.segments_yaml += std::string(i ? ", " : "") + "{line: 1}, {turn_deg: " + format_number(side) + "}";
+      square.segments.push_back(line(1));
+      square.segments.push_back(turn(side));
+    }
+    out.push_back(square);
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<ConfoundedPair> confounded_pairs(const std::vector<std::string>& names,
+                                             const Eigen::MatrixXd& c) {
+  std::vector<ConfoundedPair> out;
+  for (Eigen::Index i = 0; i < c.rows(); ++i) {
+    for (Eigen::Index j = i + 1; j < c.cols(); ++j) {
+      const double r = c(i, j) / std::sqrt(c(i, i) * c(j, j));
+      if (std::abs(r) > kConfoundedCorrelation) {
+        out.push_back({names[static_cast<std::size_t>(i)], names[static_cast<std::size_t>(j)], r});
+      }
+    }
+  }
+  std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return std::abs(a.correlation) > std::abs(b.correlation); });
+  return out;
+}
+
+std::string confounded_text(const ConfoundedPair& p) {
+  return "these experiments do not separate " + p.a + " from " + p.b + " (correlation " +
+         format_number(p.correlation, "%.3f") + "): the data fix a combination of the two, and " +
+         (p.correlation > 0 ? "raising one while raising the other" : "raising one while lowering the other") +
+         " fits almost as well; an experiment that moves only one of them separates them (next_experiments)";
+}
+
+Eigen::MatrixXd estimate_covariance(const Suite& suite, const FitResult& fit) {
+  if (fit.covariance.size() > 0 && fit.covariance.allFinite()) return fit.covariance;
+  const Eigen::MatrixXd I = fisher_information(suite, fit.model, fit.names);
+  const Eigen::MatrixXd ridge = (1e-9 * I.diagonal().cwiseMax(1e-300)).asDiagonal();
+  return (I + ridge).ldlt().solve(Eigen::MatrixXd::Identity(I.rows(), I.cols()));
+}
+
+std::vector<MenuExperiment> experiment_menu(const Suite& suite) {
+  const double rate = sample_rate_of(suite);
+  const std::int64_t runs = runs_of(suite);
+  std::vector<MenuExperiment> out;
+  for (double speed : speeds_of(suite)) {
+    for (const Recipe& r : recipes()) {
+      MenuExperiment m;
+      m.name = r.name + "-" + format_number(speed, "%.3g") + "mps";
+      m.path.sample_rate_hz = rate;
+      m.path.keyframes = keyframes_from_segments(r.segments, suite.robot.wheelbase_m, speed);
+      m.path_yaml = "{sample_rate: " + format_number(rate, "%.6g") + ", speed: " + format_number(speed, "%.6g") +
+                    ", segments: [" + r.segments_yaml + "]}";
+      m.runs = runs;
+      out.push_back(std::move(m));
+    }
+  }
+  return out;
+}
+
+Eigen::MatrixXd fisher_information(const Suite& suite, const SuiteModel& model,
+                                   const std::vector<std::string>& names) {
+  return information(sensitivities(suite, model, names));
+}
+
+std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit) {
+  const std::vector<MenuExperiment> menu = experiment_menu(suite);
+  // The menu as a suite of one run each (its prediction is all the information needs).
+  Suite trial = suite;
+  trial.experiments.clear();
+  for (const MenuExperiment& m : menu) {
+    SuiteExperiment ex;
+    ex.name = m.name;
+    ex.path = m.path;
+    ex.runs.push_back({"1", Vector3::Zero(), {}, {}});
+    trial.experiments.push_back(std::move(ex));
+  }
+  const Eigen::MatrixXd now = fisher_information(suite, fit.model, fit.names);
+  const Sensitivities s = sensitivities(trial, fit.model, fit.names);
+  std::vector<Eigen::MatrixXd> adds;
+  Eigen::VectorXd scale = now.diagonal();
+  for (std::size_t e = 0; e < menu.size(); ++e) {
+    adds.push_back(information_of_experiment(s, e, menu[e].runs));
+    scale = scale.cwiseMax(adds.back().diagonal());
+  }
+  // A relative ridge of 1e-9 keeps a parameter that the suite does not determine at all finite.
+  const Eigen::MatrixXd ridge = (1e-9 * scale.cwiseMax(1e-300)).asDiagonal();
+  const double base = 0.5 * Eigen::LDLT<Eigen::MatrixXd>(now + ridge).vectorD().array().log().sum();
+  std::vector<NextExperiment> out;
+  for (std::size_t e = 0; e < menu.size(); ++e) {
+    const Eigen::MatrixXd after = now + adds[e] + ridge;
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(after);
+    NextExperiment next{menu[e], 0.5 * ldlt.vectorD().array().log().sum() - base, {}};
+    const Eigen::MatrixXd cov = ldlt.solve(Eigen::MatrixXd::Identity(after.rows(), after.cols()));
+    for (std::size_t k = 0; k < fit.names.size(); ++k) {
+      next.expected_stderr.push_back({fit.names[k], std::sqrt(cov(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k)))});
+    }
+    out.push_back(std::move(next));
+  }
+  std::vector<std::size_t> order(out.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return out[a].information_gain > out[b].information_gain; });
+  std::vector<NextExperiment> ranked;
+  std::vector<std::size_t> kept;
+  for (std::size_t i : order) {
+    const bool same = std::any_of(kept.begin(), kept.end(), [&](std::size_t j) {
+      return (adds[i] - adds[j]).norm() <= 1e-6 * adds[j].norm();
+    });
+    if (same) continue;
+    kept.push_back(i);
+    ranked.push_back(out[i]);
+  }
+  return ranked;
+}
+
+}  // namespace odomcov

@@ -1,0 +1,387 @@
+// calibrate and diagnose's decisions: the folds of cross-validation, held-out likelihoods, exact
+// decisions on a nonlinear candidate, mimics, the guards on every adoption, the training domain
+// and the loop end to end, on simulated labs whose truth is known.
+#include "odomcov/measurement/calibrate.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "odomcov/base/format.hpp"
+#include "odomcov/measurement/domain.hpp"
+#include "synth_util.hpp"
+
+namespace odomcov {
+namespace {
+
+const std::string kStandard = ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml";
+
+/// The standard experiment set (lines, forward-back, spins, arcs, UMBmark squares) in a world
+/// with these hidden effects instead of standard.yaml's.
+WorldFile standard_world(EffectList effects, std::uint64_t seed) {
+  WorldFile w = load_world(kStandard);
+  w.world.effects = std::move(effects);
+  w.seed = seed;
+  return w;
+}
+
+const Candidate& candidate(const Diagnosis& d, const std::string& effect) {
+  const auto it = std::find_if(d.candidates.begin(), d.candidates.end(),
+                               [&](const Candidate& c) { return c.effect == effect; });
+  if (it == d.candidates.end()) throw std::runtime_error("no candidate " + effect);
+  return *it;
+}
+
+SuiteExperiment experiment(const std::string& name, const std::string& kind, const std::string& group) {
+  SuiteExperiment ex;
+  ex.name = name;
+  ex.kind = kind;
+  ex.group = group;
+  return ex;
+}
+
+TEST(Folds, KindsThenGroupsThenExperiments) {
+  Suite s;
+  for (const char* name : {"line-a", "line-b", "spin-a", "arc-a"}) s.experiments.push_back(experiment(name, default_kind(name), ""));
+  Folds f = make_folds(s);
+  EXPECT_EQ(f.by, "kind");
+  EXPECT_EQ(f.names, (std::vector<std::string>{"line", "spin", "arc"}));
+  EXPECT_EQ(f.of_experiment, (std::vector<int>{0, 0, 1, 2}));
+  EXPECT_EQ(f.training(0), (std::vector<bool>{false, false, true, true}));
+  // Two kinds: each fit would see one kind only; K folds over the experiments instead, or the
+  // groups when every experiment has one.
+  s.experiments.pop_back();
+  EXPECT_EQ(make_folds(s).by, "experiments");
+  EXPECT_EQ(make_folds(s).size(), 3u);
+  for (std::size_t i = 0; i < s.experiments.size(); ++i) s.experiments[i].group = i < 2 ? "day-1" : "day-2";
+  EXPECT_EQ(make_folds(s).by, "group");
+  EXPECT_EQ(make_folds(s).names, (std::vector<std::string>{"day-1", "day-2"}));
+  // More kinds than kMaxFolds share folds round robin; one experiment has none.
+  Suite many;
+  for (int k = 0; k < 7; ++k) many.experiments.push_back(experiment("e" + std::to_string(k), "k" + std::to_string(k), ""));
+  f = make_folds(many);
+  ASSERT_EQ(f.size(), kMaxFolds);
+  EXPECT_EQ(f.names[0], "k0+k5");
+  EXPECT_EQ(f.of_experiment[6], 1);
+  many.experiments.resize(1);
+  EXPECT_EQ(make_folds(many).size(), 0u);
+}
+
+TEST(CrossValidation, HeldOutLikelihoodOfIndependentRunsIsTheirOwnDensity) {
+  const Suite lab = test::synth_suite(load_world(kStandard), "cv_density");
+  const SuiteModel model = suite_model(lab);
+  ResidualCache cache(lab);
+  const auto& all = cache.at(model);
+  const Folds folds = make_folds(lab);
+  ASSERT_EQ(folds.by, "kind");
+  for (std::size_t f = 0; f < folds.size(); ++f) {
+    const std::vector<bool> training = folds.training(f);
+    // A view holds the parent's residuals of its experiments, and propagates nothing new.
+    ResidualCache view(cache, training);
+    const std::int64_t before = cache.computed();
+    const auto& mine = view.at(model);
+    EXPECT_EQ(cache.computed(), before);
+    ASSERT_EQ(mine.size(), static_cast<std::size_t>(std::count(training.begin(), training.end(), true)));
+    double held = 0.0;
+    const std::vector<double> terms = run_log_likelihoods(all, false);
+    std::size_t i = 0;
+    for (std::size_t e = 0; e < all.size(); ++e) {
+      for (std::size_t r = 0; r < all[e].size(); ++r, ++i) held += training[e] ? 0.0 : terms[i];
+    }
+    EXPECT_NEAR(held_out_log_likelihood(all, training, Likelihood::full), held, 1e-9 * std::abs(held)) << folds.names[f];
+  }
+}
+
+/// A scale that fades with time, 1 + a exp(-t/tau): strongly nonlinear in tau.
+EffectSpec warmup(double a, double tau) {
+  CustomEffect def;
+  def.name = "warmup";
+  def.parameters = {"a", "tau"};
+  def.scale.text = "1 + a*exp(-t/tau)";
+  return define_custom_effect(def, {a, tau});
+}
+
+TEST(Diagnose, FastAndExactAgreeOnTheWinnerWithANonlinearCandidate) {
+  // The world's scale fades from 1.03 with a time constant of 8 s. The user's hypothesis starts
+  // from a = 0.05, tau = 0.5 s, far from it in a strongly nonlinear parameter: the fast path's
+  // quadratic surrogates mispredict on the way and its fit is not verified: it stops in another
+  // basin (tau near 0.4 s), from whose optimum no local exact step escapes. diagnose refits such
+  // a finalist exactly from there and from its given values, keeps the better optimum, and names
+  // warmup with the exact path's gain, as the exact path does on its own.
+  const Suite lab = test::synth_suite(standard_world({warmup(0.03, 8.0)}, 2026), "warmup");
+  const SuiteModel model = suite_model(lab);
+  const EffectList given = {warmup(0.05, 0.5)};
+  const std::vector<std::string> only = {"scale_error", "wheelbase_error"};
+  ResidualCache cache(lab);
+  SuiteModel start = model;
+  start.effects = given;
+  const FitResult fast = fit(lab, start, {"warmup.a", "warmup.tau"}, Likelihood::full, nullptr, FitPath::fast, &cache);
+  EXPECT_FALSE(fast.verified);
+  const FitResult refitted =
+      refit_exactly_from_both(fast, start, {"warmup.a", "warmup.tau"}, Likelihood::full, nullptr, cache);
+  EXPECT_GT(refitted.log_likelihood_after, fast.log_likelihood_after + kFitTolerance);
+  EXPECT_NEAR(refitted.values(1), 8.0, 3 * refitted.stderrs(1));
+  const Diagnosis d = diagnose(lab, model, kDiagnoseAlpha, only, nullptr, given, FitPath::fast);
+  const Diagnosis exact = diagnose(lab, model, kDiagnoseAlpha, only, nullptr, given, FitPath::exact);
+  ASSERT_TRUE(d.best && exact.best);
+  EXPECT_EQ(d.candidates[*d.best].effect, "warmup");
+  EXPECT_EQ(exact.candidates[*exact.best].effect, "warmup");
+  EXPECT_TRUE(candidate(d, "warmup").exact);
+  // The same optimum, to the fast path's tolerance (0.01 in log-likelihood, as fast_path_test).
+  EXPECT_NEAR(candidate(d, "warmup").delta_log_likelihood, candidate(exact, "warmup").delta_log_likelihood, 0.01);
+  for (const Candidate& c : exact.candidates) EXPECT_EQ(candidate(d, c.effect).significant, c.significant) << c.effect;
+}
+
+TEST(Diagnose, AMimicIsNamedAndNotAdopted) {
+  // Tyre scrub on arcs only (Eb_arc = 1.02, spins at 1): offered only a single wheelbase, the
+  // loop finds it significant in-sample (a compromise between arcs and spins), but fitted
+  // without the spins it predicts them wrong, and without the arcs it predicts nothing better:
+  // a mimic. So is a scale error.
+  const Suite lab = test::synth_suite(standard_world({{"turn_dependent_wheelbase", {1.02, 1.0}}}, 7), "mimic");
+  const Diagnosis d = diagnose(lab, suite_model(lab), kDiagnoseAlpha, {"wheelbase_error", "scale_error"});
+  EXPECT_FALSE(d.best);
+  EXPECT_FALSE(d.explained);
+  const Candidate& eb = candidate(d, "wheelbase_error");
+  EXPECT_TRUE(eb.significant);
+  EXPECT_EQ(eb.verdict, "mimic");
+  EXPECT_EQ(eb.rule, "held-out likelihood");
+  EXPECT_LT(eb.delta_held_out, 0.0);
+  EXPECT_NE(eb.decision.find("is a mimic"), std::string::npos);
+  // With the true effect among the candidates, it is adopted. Only the arcs show it, and
+  // fitted without them its arc part is not determined: no kind of path can test it. It is then
+  // cross-validated over held-out experiments with every kind in training (one arc held out,
+  // the other fitted), where it predicts better.
+  const Diagnosis right = diagnose(lab, suite_model(lab), kDiagnoseAlpha, {"wheelbase_error", "turn_dependent_wheelbase"});
+  ASSERT_TRUE(right.best);
+  const Candidate& tdw = right.candidates[*right.best];
+  EXPECT_EQ(tdw.effect, "turn_dependent_wheelbase");
+  EXPECT_GT(tdw.delta_held_out, 0.0);
+  ASSERT_FALSE(tdw.held_out_by_fold.empty());
+  EXPECT_EQ(tdw.held_out_by_fold.front().fold.rfind(lab.experiments.front().name + "+", 0), 0u);  // experiment folds
+  EXPECT_NE(tdw.decision.find("predicts the held-out folds better"), std::string::npos) << tdw.decision;
+}
+
+TEST(Diagnose, ASystematicCandidateThatOnlyInflatesTheCovarianceIsStopped) {
+  // Negatively correlated wheel noise inflates the heading variance on straight lines. A custom
+  // wheelbase on lines only cannot move any mean there (nothing turns), but a smaller wheelbase
+  // inflates the predicted heading variance: its gain is all covariance.
+  const Suite lab = test::synth_suite(standard_world({{"wheel_noise_correlation", {-0.9}}}, 11), "rho");
+  CustomEffect def;
+  def.name = "line_wheelbase";
+  def.parameters = {"a"};
+  def.wheelbase_factor.text = "1 + a*(r < 0.01)";
+  const Diagnosis d = diagnose(lab, suite_model(lab), kDiagnoseAlpha, {"wheelbase_error"}, nullptr,
+                               {define_custom_effect(def, {0.0})});
+  const Candidate& c = candidate(d, "line_wheelbase");
+  EXPECT_TRUE(c.significant);
+  EXPECT_EQ(c.verdict, "stopped");
+  EXPECT_EQ(c.rule, "covariance, not mean");
+  EXPECT_LT(c.delta_mean_log_likelihood, 0.1 * c.delta_log_likelihood);
+  EXPECT_TRUE(!d.best || d.candidates[*d.best].effect != "line_wheelbase");
+}
+
+TEST(Diagnose, ACandidateAtABoundOrConfoundedIsStopped) {
+  // The standard lab's lines and spins only (standard.yaml's seed): turn_dependent_wheelbase's
+  // arc part is not determined (no arc), and its fit runs to the edge of its range.
+  WorldFile w = load_world(kStandard);
+  w.experiments.erase(std::remove_if(w.experiments.begin(), w.experiments.end(),
+                                     [](const WorldExperiment& e) { return e.name.rfind("line", 0) && e.name.rfind("spin", 0); }),
+                      w.experiments.end());
+  ASSERT_EQ(w.experiments.size(), 4u);
+  const Suite lab = test::synth_suite(w, "bound");
+  const Diagnosis d = diagnose(lab, suite_model(lab), kDiagnoseAlpha, {"turn_dependent_wheelbase"});
+  const Candidate& tdw = candidate(d, "turn_dependent_wheelbase");
+  EXPECT_TRUE(tdw.significant);
+  EXPECT_EQ(tdw.verdict, "stopped");
+  EXPECT_EQ(tdw.rule, "parameter at bound");
+  EXPECT_EQ(tdw.at_bound, (std::vector<std::string>{"turn_dependent_wheelbase.Eb_arc"}));
+  EXPECT_FALSE(d.best);
+  // A custom scale in a model that has scale_error already: the two are one parameter.
+  SuiteModel model = suite_model(lab);
+  model.effects = {{"scale_error", {1.0}}};
+  CustomEffect def;
+  def.name = "another_scale";
+  def.parameters = {"a"};
+  def.scale.text = "1 + a";
+  const Diagnosis twice = diagnose(lab, model, kDiagnoseAlpha, {"wheelbase_error"}, nullptr, {define_custom_effect(def, {0.0})});
+  const Candidate& again = candidate(twice, "another_scale");
+  EXPECT_GT(again.confounded, kConfoundedCorrelation);
+  if (again.significant) EXPECT_EQ(again.rule, "confounded");
+}
+
+TEST(Diagnose, TheNeesRuleAllowsSamplingError) {
+  // 2 sqrt(6/n): 0.49 for 100 runs.
+  const ModelSummary before{0.0, 3.2, "inconsistent"};
+  EXPECT_FALSE(moves_nees_away(before, {0.0, 3.6, ""}, 100));
+  EXPECT_TRUE(moves_nees_away(before, {0.0, 3.8, ""}, 100));
+  EXPECT_TRUE(moves_nees_away(before, {0.0, 2.2, ""}, 100));
+  EXPECT_FALSE(moves_nees_away({0.0, 50.0, ""}, {0.0, 7.0, ""}, 100));
+  EXPECT_FALSE(moves_nees_away({0.0, 2.0, ""}, {0.0, 3.3, ""}, 100));
+}
+
+TEST(Domain, TrainingRangesAndExtrapolation) {
+  const Suite lab = test::synth_suite(load_world(kStandard), "domain");
+  const Domain d = training_domain(lab, lab.robot.wheelbase_m);
+  // Every experiment at speed 0.3 (its faster wheel): lines and spins drive both wheels at it,
+  // the 1 m arcs (B = 0.4 m) their outer wheel on a radius of 1.2 m, so the mean wheel speed
+  // is 0.3 / 1.2 = 0.25 m/s.
+  EXPECT_NEAR(d.speed_mps.hi, 0.3, 1e-9);
+  EXPECT_LT(d.speed_mps.lo, 0.3);
+  EXPECT_NEAR(d.spin_fraction.lo, 0.0, 1e-12);
+  EXPECT_NEAR(d.spin_fraction.hi, 1.0, 1e-12);
+  EXPECT_NEAR(d.length_m.hi, 10.0, 1e-9);  // forward-back 5 m and back
+  // An experiment faster and longer than any training run.
+  SuiteExperiment fast = lab.experiments[1];  // line-8m
+  fast.path.keyframes = keyframes_from_segments({{PathSegment::Kind::line, 20.0, 0.0, 0.0}}, lab.robot.wheelbase_m, 0.9);
+  const std::vector<std::string> x = extrapolation(d, fast, lab.robot.wheelbase_m);
+  ASSERT_EQ(x.size(), 2u);
+  EXPECT_EQ(x[0], "speed 0.9 m/s is above the training range " + format_number(d.speed_mps.lo, "%.3g") + "-0.3 m/s");
+  EXPECT_EQ(x[1], "length 20 m is above the training range " + format_number(d.length_m.lo, "%.3g") + "-10 m");
+  EXPECT_TRUE(extrapolation(d, lab.experiments[1], lab.robot.wheelbase_m).empty());
+  // compare with a model that has the domain says so per experiment.
+  Suite with_fast = lab;
+  with_fast.experiments.push_back(fast);
+  SuiteModel model = suite_model(lab);
+  model.domain = d;
+  const Comparison c = compare(with_fast, model, 0.01);
+  EXPECT_EQ(c.experiments.back().extrapolation, x);
+  EXPECT_TRUE(c.experiments.front().extrapolation.empty());
+}
+
+TEST(Domain, ModelYamlRoundTrips) {
+  // A suite whose model block is model_yaml's (robot line, domain, effects) reads back the same
+  // domain, to the 9 digits it is written with.
+  const WorldFile w = load_world(kStandard);
+  const auto dir = test::scratch_dir("odomcov_domain_yaml");
+  for (std::size_t i = 0; i < w.experiments.size(); ++i) {
+    std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
+  }
+  const std::string plain = suite_yaml(w);
+  std::ofstream(dir / "plain.yaml") << plain;
+  const Suite lab = load_suite((dir / "plain.yaml").string());
+  SuiteModel model = suite_model(lab);
+  model.domain = training_domain(lab, lab.robot.wheelbase_m);
+  model.effects = {{"wheelbase_error", {1.01}}};
+  std::string text;
+  for (const std::string& line : {std::string("name: lab\n"), model_yaml(model),
+                                  plain.substr(plain.find("experiments:"))}) {
+    text += line;
+  }
+  std::ofstream(dir / "suite.yaml") << text;
+  const Suite back = load_suite((dir / "suite.yaml").string());
+  ASSERT_TRUE(back.model_domain);
+  EXPECT_EQ(back.model_effects, model.effects);
+  for (const auto& [a, b] : {std::pair{back.model_domain->speed_mps, model.domain->speed_mps},
+                             std::pair{back.model_domain->spin_fraction, model.domain->spin_fraction},
+                             std::pair{back.model_domain->length_m, model.domain->length_m},
+                             std::pair{back.model_domain->duration_s, model.domain->duration_s}}) {
+    EXPECT_NEAR(a.lo, b.lo, 1e-8 * std::max(1.0, b.lo));
+    EXPECT_NEAR(a.hi, b.hi, 1e-8 * std::max(1.0, b.hi));
+  }
+  // Its own training runs lie inside the domain read back.
+  for (const SuiteExperiment& ex : back.experiments) {
+    EXPECT_TRUE(extrapolation(*back.model_domain, ex, back.robot.wheelbase_m).empty()) << ex.name;
+  }
+}
+
+TEST(Calibrate, TheStandardLabEndToEnd) {
+  // standard.yaml hides Ed = 1.003 and Eb = 1.01. Train on all but the arcs, judge on the arcs.
+  const Suite lab = test::synth_suite(load_world(kStandard), "calibrate");
+  Suite train = lab, test_arcs = lab;
+  train.experiments.clear();
+  test_arcs.experiments.clear();
+  for (const SuiteExperiment& ex : lab.experiments) (ex.kind == "arc" ? test_arcs : train).experiments.push_back(ex);
+  const CalibrateResult c = calibrate(train, suite_model(train), {}, &test_arcs);
+  EXPECT_EQ(c.named, (std::vector<std::string>{"wheelbase_error", "wheel_diameter_ratio"}));
+  EXPECT_TRUE(c.explained);
+  EXPECT_TRUE(c.joint_adopted);
+  ASSERT_EQ(c.joint.names, (std::vector<std::string>{"wheelbase_error.Eb", "wheel_diameter_ratio.Ed"}));
+  for (std::size_t i = 0; i < 2; ++i) {
+    const double truth = i == 0 ? 1.01 : 1.003;
+    EXPECT_NEAR(c.joint.values(static_cast<Eigen::Index>(i)), truth, 3 * c.joint.stderrs(static_cast<Eigen::Index>(i))) << c.joint.names[i];
+  }
+  ASSERT_TRUE(c.model.domain);
+  EXPECT_TRUE(c.confounded.empty());
+  ASSERT_FALSE(c.next_experiments.empty());
+  // diff_drive: the multipliers are the corrected odometry's (constant factors: Eb and the
+  // wheels' 2/(Ed + 1), 2 Ed/(Ed + 1)).
+  const double Eb = c.joint.values(0), Ed = c.joint.values(1);
+  EXPECT_NEAR(c.diff_drive.wheel_separation_multiplier, Eb, 1e-9);
+  EXPECT_NEAR(c.diff_drive.left_wheel_radius_multiplier, 2 / (Ed + 1), 1e-9);
+  EXPECT_NEAR(c.diff_drive.right_wheel_radius_multiplier, 2 * Ed / (Ed + 1), 1e-9);
+  EXPECT_FALSE(c.diff_drive.motion_dependent);
+  // Held out: the arcs, predicted from the other kinds, consistent at alpha (NEES of 60 runs:
+  // chi^2_180 / 60, two-sided 0.01 bounds 2.32 and 3.76).
+  ASSERT_TRUE(c.holdout);
+  EXPECT_EQ(c.holdout->summary.verdict, "consistent");
+  EXPECT_GT(c.holdout->summary.nees_mean, 2.32);
+  EXPECT_LT(c.holdout->summary.nees_mean, 3.76);
+  ASSERT_EQ(c.holdout->nees_by_kind.size(), 1u);
+  EXPECT_EQ(c.holdout->nees_by_kind[0].first, "arc");
+  // The arcs' mean wheel speed (0.25 m/s) is below every training run's.
+  ASSERT_FALSE(c.holdout->extrapolation.empty());
+  EXPECT_EQ(c.holdout->extrapolation[0].rfind("arc-left: speed 0.25 m/s is below the training range", 0), 0u);
+}
+
+}  // namespace
+}  // namespace odomcov
+
+namespace odomcov {
+namespace {
+
+/// A world whose runs hardly separate a travel scale Es from a wheelbase factor Eb: spins on the
+/// spot, whose heading fixes only Es/Eb, and one short line, which alone measures Es (weakly:
+/// 0.5 m); plus one more experiment (name, runs, path) when `extra_name` is not empty.
+std::string confounded_world(const std::string& extra_name, std::int64_t extra_runs, const std::string& extra_path) {
+  std::string text =
+      "name: confounded\n"
+      "robot: {wheelbase: 0.4, k_left: 1.0e-3, k_right: 1.0e-3}\n"
+      "world:\n  effects:\n    - scale_error: {Es: 1.01}\n    - wheelbase_error: {Eb: 1.02}\n"
+      "measurement_noise: {xy: 0.002, theta_deg: 0.1}\n"
+      "seed: 2311\n"
+      "experiments:\n"
+      "  - name: spin-a\n    runs: 30\n    path: {sample_rate: 50, speed: 0.3, segments: [{turn_deg: 360}]}\n"
+      "  - name: line-a\n    runs: 10\n    path: {sample_rate: 50, speed: 0.3, segments: [{line: 0.5}]}\n";
+  if (!extra_name.empty()) {
+    text += "  - name: " + extra_name + "\n    runs: " + std::to_string(extra_runs) + "\n    path: " + extra_path + "\n";
+  }
+  return text;
+}
+
+double worst_stderr(const FitResult& f) { return f.stderrs.maxCoeff(); }
+
+TEST(Design, TheRecommendedExperimentReducesTheWorstStandardErrorMost) {
+  // The next-experiment advice, checked the way a user would: each item of the menu is recorded
+  // (synthesised from the same world), added to the suite and the two parameters refitted. The
+  // one the D-optimal ranking recommends must leave the smallest worst standard error of all.
+  const std::vector<std::string> names = {"scale_error.Es", "wheelbase_error.Eb"};
+  const Suite lab = test::synth_suite(test::world_from_text(confounded_world("", 0, ""), "conf"), "conf");
+  const FitResult before = fit(lab, suite_model(lab), names);
+  const std::vector<ConfoundedPair> pairs = confounded_pairs(before.names, estimate_covariance(lab, before));
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_GT(std::abs(pairs[0].correlation), kConfoundedCorrelation);
+  const std::vector<NextExperiment> ranked = next_experiments(lab, before);
+  ASSERT_GE(ranked.size(), 2u);
+  std::vector<double> worst;
+  for (std::size_t i = 0; i < ranked.size(); ++i) {
+    const MenuExperiment& m = ranked[i].experiment;
+    const std::string tag = "conf" + std::to_string(i);
+    const Suite more = test::synth_suite(test::world_from_text(confounded_world(m.name, m.runs, m.path_yaml), tag), tag);
+    worst.push_back(worst_stderr(fit(more, suite_model(more), names)));
+    // The expected standard errors foretell the refit's (observed information at the new
+    // estimate; for parameters that move the mean, nearly the expected one): within 10%.
+    double expected = 0.0;
+    for (const auto& [name, se] : ranked[i].expected_stderr) expected = std::max(expected, se);
+    EXPECT_NEAR(worst.back(), expected, 0.1 * expected) << m.name;
+  }
+  const double best_other = *std::min_element(worst.begin() + 1, worst.end());
+  EXPECT_LT(worst.front(), worst_stderr(before));
+  EXPECT_LE(worst.front(), best_other) << ranked.front().experiment.name;
+  std::printf("worst stderr: before %.3g, after the recommended %s %.3g, best other %.3g (%zu items)\n",
+              worst_stderr(before), ranked.front().experiment.name.c_str(), worst.front(), best_other, ranked.size());
+}
+
+}  // namespace
+}  // namespace odomcov
