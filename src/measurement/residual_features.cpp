@@ -14,11 +14,17 @@ constexpr int kDim = 3;
 /// A wheel's direction counts as reversed once it has moved this far back from its furthest
 /// point: encoder jitter of a tick or two on a standing wheel is not a reversal.
 constexpr double kReversalHysteresis_m = 0.005;
+/// sin(x)/x; below this |x| its Taylor series 1 - x^2/6 (the next term, x^4/120, is below 1e-18
+/// there, under rounding), with no jump at the switch.
+constexpr double kSincSeriesBelow = 1e-4;
+
+double sinc(double x) { return std::abs(x) < kSincSeriesBelow ? 1.0 - x * x / 6.0 : std::sin(x) / x; }
 
 /// Accumulates the features piece by piece.
 class FeatureAccumulator {
  public:
-  explicit FeatureAccumulator(double wheelbase_m) : B_(wheelbase_m) {}
+  /// `heading0_rad`: the run's start heading in the reference's frame.
+  FeatureAccumulator(double wheelbase_m, double heading0_rad) : B_(wheelbase_m), heading_(heading0_rad) {}
 
   void add(const ArcSegment& piece, double duration_s) {
     const double travel = 0.5 * (std::abs(piece.left_m) + std::abs(piece.right_m));
@@ -38,6 +44,12 @@ class FeatureAccumulator {
     }
     track(left_, piece.left_m);
     track(right_, piece.right_m);
+    // The mean of (cos, sin) of a heading turning linearly by dtheta over the piece:
+    // (cos, sin)(mid) sinc(dtheta/2), weighted by the travel.
+    const double mid = heading_ + 0.5 * dtheta, weight = travel * sinc(0.5 * dtheta);
+    heading_cos_ += weight * std::cos(mid);
+    heading_sin_ += weight * std::sin(mid);
+    heading_ += dtheta;
   }
 
   PathFeatures result() const {
@@ -48,6 +60,8 @@ class FeatureAccumulator {
     f.reversals = left_.reversals + right_.reversals;
     f.speed_mps = f.distance_m > 0 ? speed_weighted_ / f.distance_m : 0.0;
     f.acceleration_mps = 0.5 * (finished(left_speed_) + finished(right_speed_));
+    f.heading_cos = f.distance_m > 0 ? heading_cos_ / f.distance_m : 0.0;
+    f.heading_sin = f.distance_m > 0 ? heading_sin_ / f.distance_m : 0.0;
     return f;
   }
 
@@ -105,6 +119,8 @@ class FeatureAccumulator {
   }
 
   double B_;
+  double heading_;  // absolute heading at the start of the next piece [rad]
+  double heading_cos_ = 0, heading_sin_ = 0;
   PathFeatures f_;
   double abs_turn_ = 0, spin_ = 0, signed_centre_ = 0, abs_centre_ = 0, speed_weighted_ = 0;
   Wheel left_, right_;
@@ -113,13 +129,15 @@ class FeatureAccumulator {
 
 /// A residual feature: its value(s) for a run (two columns for the heading's direction), and
 /// what a misfit along it points at, in the mean and in the scatter. `columns` 0: the groups'
-/// one-way ANOVA. The one table every list of features comes from.
+/// one-way ANOVA. `needs_heading`: testable only when every run's start heading is known. The
+/// one table every list of features comes from.
 struct Feature {
   const char* name;
   int columns;
   double (*value)(const PathFeatures& f, int column);
   const char* mean;
   const char* scatter;
+  bool needs_heading = false;
 };
 
 const std::vector<Feature>& features() {
@@ -173,6 +191,18 @@ const std::vector<Feature>& features() {
        "such as scale: \"1 - c*abs(a)\" (a the acceleration) would model it",
        "noise that grows with the starts and stops: random slip as the wheels speed up or slow "
        "down; a custom noise: \"1 + c*abs(a)\" would model it"},
+      {"heading", 2,
+       [](const PathFeatures& f, int column) { return column == 0 ? f.heading_cos : f.heading_sin; },
+       "an error that depends on the direction the robot drives in the room (its absolute "
+       "heading, from each run's heading0): a floor that slopes, down which the robot slides "
+       "sideways, or a carpet or floorboards whose grain makes a wheel slip more one way; not in "
+       "the catalogue: a custom effect such as lateral: \"a*cos(heading) + b*sin(heading)\" (a "
+       "slope: sideways slip per metre) or scale: \"1 + a*cos(heading) + b*sin(heading)\" would "
+       "model it",
+       "a spread that depends on the direction the robot drives in the room: slip that is more "
+       "random uphill than downhill, or across a carpet's grain than along it; a custom noise: "
+       "\"exp(a*cos(heading) + b*sin(heading))\" would model it",
+       true},
       {"group", 0, nullptr,
        "an error that differs between groups (sessions, days, floors) more than the model "
        "allows: a parameter that changes from group to group, e.g. tyre pressure or floor "
@@ -272,6 +302,9 @@ void add_features(PathFeatures& sum, const PathFeatures& f, double n) {
   sum.reversals += f.reversals / n;
   sum.speed_mps += f.speed_mps / n;
   sum.acceleration_mps += f.acceleration_mps / n;
+  sum.heading_cos += f.heading_cos / n;
+  sum.heading_sin += f.heading_sin / n;
+  sum.heading_known = sum.heading_known && f.heading_known;
 }
 
 /// The scatter part of an experiment (see residual_alignment): W_e = sum d_i' Sigma_i^-1 d_i
@@ -306,6 +339,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
   const double n = static_cast<double>(ex.runs.size());
   Matrix3 C = Matrix3::Zero();
   PathFeatures sum;
+  sum.heading_known = true;  // until a run without its start heading
   std::vector<Vector3> runs;
   std::vector<Matrix3> covs;
   for (std::size_t r = 0; r < ex.runs.size(); ++r) {
@@ -348,9 +382,12 @@ std::vector<ExperimentMean> experiment_means(const Suite& suite, const SuiteMode
 
 /// A feature's columns over the experiments, each centred and scaled to at most 1 in absolute
 /// value (the fits do not depend on it, their conditioning does); the columns that do not vary
-/// across the experiments are dropped.
+/// across the experiments are dropped, and a feature of the heading has none unless every run's
+/// start heading is known.
 std::vector<Eigen::VectorXd> feature_columns(const std::vector<const ExperimentMean*>& ms, const Feature& f) {
   std::vector<Eigen::VectorXd> out;
+  const auto heading_unknown = [](const ExperimentMean* m) { return !m->features.heading_known; };
+  if (f.needs_heading && std::any_of(ms.begin(), ms.end(), heading_unknown)) return out;
   const auto m = static_cast<Eigen::Index>(ms.size());
   for (int c = 0; c < f.columns; ++c) {
     Eigen::VectorXd v(m);
@@ -510,7 +547,7 @@ void adjust_and_rank(std::vector<ResidualAlignment>& out) {
 }  // namespace
 
 PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m) {
-  FeatureAccumulator acc(wheelbase_m);
+  FeatureAccumulator acc(wheelbase_m, run.heading0_rad);
   if (ex.logged) {
     for (std::size_t i = 0; i < run.pieces.size(); ++i) {
       acc.add(run.pieces[i], i < run.durations_s.size() ? run.durations_s[i] : 0.0);
@@ -520,7 +557,9 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
       acc.add(ex.path.interval(i), ex.path.keyframes[i + 1].t_s - ex.path.keyframes[i].t_s);
     }
   }
-  return acc.result();
+  PathFeatures f = acc.result();
+  f.heading_known = run.heading0_given;
+  return f;
 }
 
 std::string experiment_group(const SuiteExperiment& ex) { return group_key(ex); }

@@ -28,6 +28,14 @@ struct PathFeatures {
   /// kAccelerationHysteresis_mps (encoder jitter on logged runs does not count). One start and
   /// one stop at speed v give 2v.
   double acceleration_mps = 0.0;
+  /// The direction the robot drives in the reference's frame: the mean of cos and sin of the
+  /// absolute heading psi = heading0 + theta over the run (theta the encoder heading), weighted
+  /// by the travel (|dL| + |dR|)/2 driven at it. Over a piece whose heading turns linearly from
+  /// psi_a by dpsi, the mean is exact: (cos, sin)(psi_a + dpsi/2) sin(dpsi/2)/(dpsi/2). A length
+  /// below 1 means the run turned (0 for a whole spin). Only where the run's start heading is
+  /// known (heading_known: SuiteRun::heading0_given); 0 otherwise.
+  double heading_cos = 0.0, heading_sin = 0.0;
+  bool heading_known = false;
 };
 
 /// A wheel's speed counts as changed once it has moved this far from its last turning point.
@@ -72,8 +80,10 @@ struct ResidualAlignment {
 ///   F = ((RSS0 - RSS1)/6) / (RSS1/(3m - 12)) ~ F(6, 3m - 12),
 /// with RSS the C_e^-1-weighted residual sums of squares over the m experiments. H0's constant
 /// terms and the estimated scale (RSS1) make the test about variation *with the feature*, not a
-/// misfit common to every experiment or an overall variance too small. group is the one-way
-/// ANOVA: H0's terms per group against common ones, F(6(G - 1), 3m - 6G).
+/// misfit common to every experiment or an overall variance too small. heading has two columns
+/// (its cos and sin), each modulating the six terms: F(12, 3m - 18); it is untestable unless
+/// every run's start heading is known. group is the one-way ANOVA: H0's terms per group against
+/// common ones, F(6(G - 1), 3m - 6G).
 ///
 /// Scatter part. For experiment e with n >= 2 runs, d_i = r_i - mean_j r_j (end frame) and
 ///   W_e = sum_i d_i' Sigma_i^-1 d_i,  E[W_e] = sum_i (3 (1 - 2/n) + tr(Sigma_i^-1 Sigma_bar)/n)
@@ -84,7 +94,8 @@ struct ResidualAlignment {
 /// F = ((D0 - D1)/q) / (X1^2/(m - p1)) ~ F(q, m - p1), D the deviances
 /// 2 sum nu_e/2 ((s - mu)/mu - ln(s/mu)) and X1^2 H1's Pearson statistic, the dispersion
 /// estimated as in the mean part [McCullagh89, §8.3], so that an overall spread too large or tails
-/// heavier than Gaussian do not count. group: log E s_e per group against a common one.
+/// heavier than Gaussian do not count (heading: two columns, F(2, m - 3)). group: log E s_e per
+/// group against a common one.
 /// Each p_value is Bonferroni-corrected over every testable feature and part.
 std::vector<ResidualAlignment> residual_alignment(
     const Suite& suite, const SuiteModel& model,
