@@ -45,10 +45,11 @@ import math
 import os
 import re
 import shutil
-import subprocess
 import sys
 
 import numpy
+
+from suite_tools import _model_span, copy_suite, run  # noqa: F401 (re-exported to the study scripts)
 
 NOISE_LEVEL = "wheel_noise_level"
 # The parameters `fit` refines for an effect whose name does not prefix them (effect.param, the
@@ -70,37 +71,6 @@ def fit_params(effect, parameters):
 def path_type(name):
     """An experiment's path type: its name's prefix before the first '-'."""
     return name.split("-", 1)[0]
-
-
-def run(cmd):
-    done = subprocess.run(cmd, capture_output=True, text=True)
-    if done.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({done.returncode}): {done.stderr.strip()}")
-    return done.stdout
-
-
-def copy_suite(suite, to):
-    """Copies a suite elsewhere, making its relative CSV paths absolute."""
-    base = os.path.dirname(os.path.abspath(suite))
-    with open(suite) as f:
-        text = f.read()
-    # plain or quoted (the suite writer quotes file names) relative paths
-    text = re.sub(r"(?<=[\s\[,])([\"']?)(?!/)([^\s,\[\]{}'\"]+\.csv)\1(?=[\s,\]]|$)",
-                  lambda m: m.group(1) + os.path.join(base, m.group(2)) + m.group(1), text)
-    with open(to, "w") as f:
-        f.write(text)
-
-
-def _model_span(lines):
-    """Indices of the robot line and of the model block [start, end) (None, None if absent)."""
-    robot = next(i for i, line in enumerate(lines) if line.startswith("robot:"))
-    start = next((i for i, line in enumerate(lines) if line.startswith("model:")), None)
-    end = start
-    if start is not None:
-        end = start + 1
-        while end < len(lines) and (lines[end].startswith(" ") or not lines[end].strip()):
-            end += 1
-    return robot, start, end
 
 
 def model_of(suite):
