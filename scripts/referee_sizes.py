@@ -11,9 +11,12 @@ get exact (Clopper-Pearson) 95% intervals.
 
   referee_sizes.py --odomcov BIN --out DIR [--worlds N] [--alpha A] [--cases a,b] [--seed S]
                    [--report FILE.json] [--experiments K]
+  referee_sizes.py --merge A.json B.json ... --report FILE.json
 
---experiments K keeps the first K experiments of the standard set (a smaller lab, for ctest).
-Prints one line per case and writes the JSON report (every world's p-value and verdict)."""
+--experiments K keeps the first K experiments of the standard set (a smaller lab).
+Prints one line per case and writes the JSON report (every world's p-value and verdict).
+--merge joins the reports of runs made case by case (in parallel, say) into one, and prints
+the same lines."""
 import argparse
 import json
 import math
@@ -32,14 +35,22 @@ BUMPS = "- bumps: {rate: 0.5, sigma: 0.005}"
 # The same variance rate sigma^2 = 1.25e-5 per metre, other tails: only the shape tells them apart.
 BUMPS_BIGGER = "- bumps: {rate: 0.125, sigma: 0.01}"
 BUMPS_SMALLER = "- bumps: {rate: 2.0, sigma: 0.0025}"
+# A random custom effect: a scale and a wheelbase drawn once per run (the effect language).
+RANDOM_CUSTOM = ('- custom: {name: load, parameters: {e: 0.0, w: 0.0}, random: {e: 0.003, w: 0.004}, '
+                 'scale: "1 + e", wheelbase_factor: "1 + w"}')
+# Large heading noise: k = 3e-3 (three times the standard lab's), where the arc update bends the
+# white wheel noise enough that compare's automatic choice simulates (docs/diagnose.md).
+NOISY_ROBOT = "robot: {wheelbase: 0.4, k_left: 3.0e-3, k_right: 3.0e-3}"
 
-# name: (world effects, model effects, what the model is)
+# name: (world effects, model effects, what the model is, robot line or None for the standard's)
 CASES = {
-    "gaussian": (SYSTEMATIC, SYSTEMATIC, "correct"),
-    "per_run_radius": (SYSTEMATIC + [PER_RUN], SYSTEMATIC + [PER_RUN], "correct"),
-    "bumps": (SYSTEMATIC + [BUMPS], SYSTEMATIC + [BUMPS], "correct"),
-    "bumps_too_big": (SYSTEMATIC + [BUMPS], SYSTEMATIC + [BUMPS_BIGGER], "wrong"),
-    "bumps_too_small": (SYSTEMATIC + [BUMPS], SYSTEMATIC + [BUMPS_SMALLER], "wrong"),
+    "gaussian": (SYSTEMATIC, SYSTEMATIC, "correct", None),
+    "per_run_radius": (SYSTEMATIC + [PER_RUN], SYSTEMATIC + [PER_RUN], "correct", None),
+    "bumps": (SYSTEMATIC + [BUMPS], SYSTEMATIC + [BUMPS], "correct", None),
+    "random_custom": (SYSTEMATIC + [RANDOM_CUSTOM], SYSTEMATIC + [RANDOM_CUSTOM], "correct", None),
+    "heading_noise": (SYSTEMATIC, SYSTEMATIC, "correct", NOISY_ROBOT),
+    "bumps_too_big": (SYSTEMATIC + [BUMPS], SYSTEMATIC + [BUMPS_BIGGER], "wrong", None),
+    "bumps_too_small": (SYSTEMATIC + [BUMPS], SYSTEMATIC + [BUMPS_SMALLER], "wrong", None),
 }
 
 
@@ -70,8 +81,10 @@ def clopper_pearson(k, n, level=0.95):
     return lower, upper
 
 
-def world_text(effects, seed, experiments):
+def world_text(effects, seed, experiments, robot=None):
     text = open(STANDARD).read()
+    if robot:
+        text = re.sub(r"^robot: .*$", robot, text, count=1, flags=re.M)
     text = re.sub(r"world:\n  effects:\n(    - .*\n)+", "world:\n  effects:\n" +
                   "".join(f"    {e}\n" for e in effects), text)
     text = re.sub(r"^seed: .*$", f"seed: {seed}", text, flags=re.M)
@@ -100,7 +113,7 @@ def compare(odomcov, suite, alpha, calibration, seed, out):
 
 
 def run_case(args, name):
-    world_effects, model_effects, kind = CASES[name]
+    world_effects, model_effects, kind, robot = CASES[name]
     rows = []
     for i in range(args.worlds):
         seed = args.seed + i
@@ -108,7 +121,7 @@ def run_case(args, name):
         os.makedirs(work, exist_ok=True)
         world = os.path.join(work, "world.yaml")
         with open(world, "w") as f:
-            f.write(world_text(world_effects, seed, args.experiments))
+            f.write(world_text(world_effects, seed, args.experiments, robot))
         lab = os.path.join(work, "lab")
         subprocess.run([args.odomcov, "synth", world, "--out", lab], check=True, stdout=subprocess.DEVNULL)
         suite = os.path.join(lab, "suite.yaml")
@@ -120,7 +133,7 @@ def run_case(args, name):
             row["gaussian"] = compare(args.odomcov, suite, args.alpha, "gaussian", 1,
                                       os.path.join(work, "compare_gaussian.json"))
         rows.append(row)
-    return {"kind": kind, "world": world_effects, "model": model_effects, "worlds": rows}
+    return {"kind": kind, "world": world_effects, "model": model_effects, "robot": robot, "worlds": rows}
 
 
 def summarise(name, case, alpha, key):
@@ -135,10 +148,44 @@ def summarise(name, case, alpha, key):
             "median_replicates": replicates[len(replicates) // 2] if replicates else 0}
 
 
+def summary_line(name, key, s, seconds):
+    return (f"{name:16s} {key:10s} {s['model']:7s}: {s['rejections']:4d} of {s['worlds']:4d} "
+            f"rejected at alpha = {s['alpha']} ({100 * s['rate']:.2f}%, exact 95% interval "
+            f"{100 * s['interval_95'][0]:.2f}-{100 * s['interval_95'][1]:.2f}%), "
+            f"{s['close_calls']} close calls, median B {s['median_replicates']}, {seconds:.0f} s")
+
+
+def add_case(report, name, case):
+    report["cases"][name] = case
+    for key in ("simulation", "gaussian"):
+        if any(key in r for r in case["worlds"]):
+            s = summarise(name, case, report["alpha"], key)
+            report["summary"].append(s)
+            print(summary_line(name, key, s, case["seconds"]), flush=True)
+
+
+def merge(files, out):
+    report = None
+    for file in files:
+        with open(file) as f:
+            part = json.load(f)
+        if report is None:
+            report = {"alpha": part["alpha"], "seed": part["seed"], "cases": {}, "summary": []}
+        if part["alpha"] != report["alpha"] or part["seed"] != report["seed"]:
+            sys.exit(f"{file}: alpha or seed differs from {files[0]}'s")
+        for name, case in part["cases"].items():
+            add_case(report, name, case)
+    if out:
+        with open(out, "w") as f:
+            json.dump(report, f, indent=1)
+    return 0
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--odomcov", required=True)
-    p.add_argument("--out", required=True)
+    p.add_argument("--merge", nargs="+")
+    p.add_argument("--odomcov")
+    p.add_argument("--out")
     p.add_argument("--worlds", type=int, default=200)
     p.add_argument("--alpha", type=float, default=0.01)
     p.add_argument("--seed", type=int, default=20261201)
@@ -146,21 +193,16 @@ def main():
     p.add_argument("--experiments", type=int, default=0)
     p.add_argument("--report")
     args = p.parse_args()
-    report = {"alpha": args.alpha, "worlds": args.worlds, "seed": args.seed, "cases": {}, "summary": []}
+    if args.merge:
+        return merge(args.merge, args.report)
+    if not args.odomcov or not args.out:
+        p.error("--odomcov and --out are required (or --merge)")
+    report = {"alpha": args.alpha, "seed": args.seed, "cases": {}, "summary": []}
     for name in args.cases.split(","):
         start = time.time()
         case = run_case(args, name)
         case["seconds"] = time.time() - start
-        report["cases"][name] = case
-        for key in ("simulation", "gaussian"):
-            if any(key in r for r in case["worlds"]):
-                s = summarise(name, case, args.alpha, key)
-                report["summary"].append(s)
-                print(f"{name:16s} {key:10s} {s['model']:7s}: {s['rejections']:4d} of {s['worlds']:4d} "
-                      f"rejected at alpha = {args.alpha} ({100 * s['rate']:.2f}%, exact 95% interval "
-                      f"{100 * s['interval_95'][0]:.2f}-{100 * s['interval_95'][1]:.2f}%), "
-                      f"{s['close_calls']} close calls, median B {s['median_replicates']}, "
-                      f"{case['seconds']:.0f} s", flush=True)
+        add_case(report, name, case)
     if args.report:
         with open(args.report, "w") as f:
             json.dump(report, f, indent=1)

@@ -25,10 +25,14 @@
 namespace odomcov {
 namespace {
 
-/// A small lab: a line, a spin, an arc and a square, 20 runs each, two groups.
-std::string lab_world(const std::string& effects, std::uint64_t seed) {
+/// The small lab's wheel noise k [sqrt(m)], as the standard lab's.
+constexpr double kNominalNoise = 1e-3;
+
+/// A small lab: a line, a spin, an arc and a square, 20 runs each, two groups; the robot's wheel
+/// noise k [sqrt(m)].
+std::string lab_world(const std::string& effects, std::uint64_t seed, double k = kNominalNoise) {
   return "name: referee-lab\n"
-         "robot: {wheelbase: 0.4, k_left: 1.0e-3, k_right: 1.0e-3}\n"
+         "robot: {wheelbase: 0.4, k_left: " + std::to_string(k) + ", k_right: " + std::to_string(k) + "}\n"
          "world:\n  effects:\n" + effects +
          "measurement_noise: {xy: 0.002, theta_deg: 0.1}\n"
          "seed: " + std::to_string(seed) + "\n"
@@ -44,14 +48,21 @@ std::string lab_world(const std::string& effects, std::uint64_t seed) {
 constexpr const char* kSystematic = "    - wheel_diameter_ratio: {Ed: 1.003}\n    - wheelbase_error: {Eb: 1.01}\n";
 constexpr const char* kPerRun = "    - per_run_radius: {sigma: 0.004}\n";
 constexpr const char* kBumps = "    - bumps: {rate: 1.0, sigma: 0.006}\n";
+/// Wheel noise k [sqrt(m)] large enough that the small lab's automatic calibration simulates
+/// (AutomaticCalibrationIsGaussianOnlyForGaussianWorlds).
+constexpr double kLargeHeadingNoise = 0.03;
+/// A random custom effect: a scale and a wheelbase drawn once per run.
+constexpr const char* kRandomCustom =
+    "    - custom: {name: load, parameters: {e: 0.0, w: 0.0}, random: {e: 0.004, w: 0.005}, scale: \"1 + e\", "
+    "wheelbase_factor: \"1 + w\"}\n";
 /// The same variance per metre (rate sigma^2 = 3.6e-5), impulses twice as large.
 constexpr const char* kBumpsTooBig = "    - bumps: {rate: 0.25, sigma: 0.012}\n";
 
-/// The lab's suite synthesised from `world_effects`, with `model_effects` as its model.
-Suite lab(const std::string& world_effects, const std::string& model_effects, std::uint64_t seed,
-          const std::filesystem::path& dir) {
+/// The suite `odomcov synth` writes for the world `world_text`, in `dir`, with `model_effects` as
+/// its model.
+Suite synthesised(const std::string& world_text, const std::string& model_effects, const std::filesystem::path& dir) {
   std::filesystem::create_directories(dir);
-  std::ofstream(dir / "world.yaml") << lab_world(world_effects, seed);
+  std::ofstream(dir / "world.yaml") << world_text;
   const WorldFile w = load_world((dir / "world.yaml").string());
   for (std::size_t i = 0; i < w.experiments.size(); ++i) {
     std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
@@ -60,6 +71,13 @@ Suite lab(const std::string& world_effects, const std::string& model_effects, st
   suite = std::regex_replace(suite, std::regex("\nexperiments:"), "\nmodel:\n  effects:\n" + model_effects + "experiments:");
   std::ofstream(dir / "suite.yaml") << suite;
   return load_suite((dir / "suite.yaml").string());
+}
+
+/// The small lab's suite synthesised from `world_effects`, with `model_effects` as its model;
+/// `k`: the robot's wheel noise.
+Suite lab(const std::string& world_effects, const std::string& model_effects, std::uint64_t seed,
+          const std::filesystem::path& dir, double k = kNominalNoise) {
+  return synthesised(lab_world(world_effects, seed, k), model_effects, dir);
 }
 
 CalibrationOptions simulation(std::uint64_t seed) {
@@ -172,7 +190,7 @@ TEST(Compare, AutomaticCalibrationIsGaussianOnlyForGaussianWorlds) {
   EXPECT_NE(c.calibration.reason.find("per_run_radius"), std::string::npos) << c.calibration.reason;
   // Large heading noise: white and Gaussian at the wheels, but the arc update bends it.
   SuiteModel noisy = suite_model(gaussian);
-  noisy.robot.noise = {0.03, 0.03};
+  noisy.robot.noise = {kLargeHeadingNoise, kLargeHeadingNoise};
   const Comparison banana = compare(gaussian, noisy, 0.01);
   EXPECT_EQ(banana.calibration.method, CalibrationMethod::simulation);
   EXPECT_NE(banana.calibration.reason.find("heading noise"), std::string::npos) << banana.calibration.reason;
@@ -214,13 +232,14 @@ struct SizeCase {
   bool correct;
 };
 
-/// Rejections of the referee's verdict at alpha over `worlds` labs (seeds first, first + 1, ...).
-int rejections(const SizeCase& c, int worlds, double alpha, std::uint64_t first) {
+/// Rejections of the referee's verdict at alpha over `worlds` labs (seeds first, first + 1, ...);
+/// `k`: the world's and the model's wheel noise (the robot's k_left = k_right).
+int rejections(const SizeCase& c, int worlds, double alpha, std::uint64_t first, double k = kNominalNoise) {
   const auto dir = test::scratch_dir(std::string("referee_size_") + c.name);
   int rejected = 0;
   for (int i = 0; i < worlds; ++i) {
     const std::uint64_t seed = first + static_cast<std::uint64_t>(i);
-    const Suite suite = lab(c.world, c.model, seed, dir / std::to_string(i));
+    const Suite suite = lab(c.world, c.model, seed, dir / std::to_string(i), k);
     const Comparison r = compare(suite, suite_model(suite), alpha, simulation(seed + 1000003));
     rejected += r.verdict.inconsistent() ? 1 : 0;
   }
@@ -228,12 +247,13 @@ int rejections(const SizeCase& c, int worlds, double alpha, std::uint64_t first)
 }
 
 /// The size at alpha = 0.1 over 50 labs per correct model (Gaussian with the simulation forced,
-/// per-run radius, bumps): the rejections lie within the binomial(50, 0.1) central interval of
-/// probability 1 - 1e-3, [0, 13] (P(X > 13) = 3e-4; with 50 worlds X = 0 has probability 5e-3,
-/// so only the upper bound is tested). Against bumps twice as large at the same variance the
-/// referee rejects more often than the size allows: above the same bound.
-/// The nominal 1% is measured over 1000 standard labs by scripts/referee_sizes.py
-/// (results/referee/).
+/// per-run radius, bumps, a random custom effect, and heading noise large enough that compare's
+/// automatic choice simulates, k = 0.03): the rejections lie within the binomial(50, 0.1) central
+/// interval of probability 1 - 1e-3, [0, 13] (P(X > 13) = 3e-4; with 50 worlds X = 0 has
+/// probability 5e-3, so only the upper bound is tested). Against bumps twice as large at the
+/// same variance the referee rejects more often than the size allows: above the same bound.
+/// The nominal 1% on the standard lab is measured by scripts/referee_sizes.py
+/// (results/referee/README.md).
 TEST(Compare, SimulatedVerdictHasItsSizeAndPower) {
   constexpr double kAlpha = 0.1;
   constexpr int kWorlds = 50;
@@ -242,9 +262,11 @@ TEST(Compare, SimulatedVerdictHasItsSizeAndPower) {
   const std::string systematic = kSystematic;
   const std::vector<SizeCase> correct = {{"gaussian", systematic, systematic, true},
                                          {"per_run_radius", systematic + kPerRun, systematic + kPerRun, true},
-                                         {"bumps", systematic + kBumps, systematic + kBumps, true}};
+                                         {"bumps", systematic + kBumps, systematic + kBumps, true},
+                                         {"random_custom", systematic + kRandomCustom, systematic + kRandomCustom, true},
+                                         {"heading_noise", systematic, systematic, true}};
   for (const SizeCase& c : correct) {
-    const int r = rejections(c, kWorlds, kAlpha, 1000);
+    const int r = rejections(c, kWorlds, kAlpha, 1000, c.name == std::string("heading_noise") ? kLargeHeadingNoise : kNominalNoise);
     EXPECT_LE(r, upper) << c.name << ": " << r << " of " << kWorlds << " rejected at alpha " << kAlpha;
     std::printf("%s: %d of %d rejected at alpha = %.2f (binomial bound %g)\n", c.name, r, kWorlds, kAlpha, upper);
   }
@@ -252,6 +274,50 @@ TEST(Compare, SimulatedVerdictHasItsSizeAndPower) {
   const int r = rejections(wrong, kWorlds, kAlpha, 2000);
   std::printf("%s: %d of %d rejected at alpha = %.2f\n", wrong.name, r, kWorlds, kAlpha);
   EXPECT_GT(r, upper) << "a wrong bump size is not rejected more often than the size allows";
+}
+
+/// The standard lab (configs/worlds/standard.yaml: 9 experiments, 19 tests), at 10 samples per
+/// second and 20 runs per experiment to keep it quick, its world's effects `effects`, seed `seed`,
+/// with those effects as its model.
+Suite standard_lab(const std::string& effects, std::uint64_t seed, const std::filesystem::path& dir) {
+  std::ifstream in(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  text = std::regex_replace(text, std::regex("world:\n  effects:\n(    - .*\n)+"), "world:\n  effects:\n" + effects);
+  text = std::regex_replace(text, std::regex("\nseed: .*\n"), "\nseed: " + std::to_string(seed) + "\n");
+  text = std::regex_replace(text, std::regex("sample_rate: 50"), "sample_rate: 10");
+  text = std::regex_replace(text, std::regex("runs: [0-9]+"), "runs: 20");
+  return synthesised(text, effects, dir);
+}
+
+/// One look only (B = 99): the referee rejects at alpha = 0.01 exactly when the data lie beyond
+/// every replicate, which on a correct model happens with probability 1/(B + 1) = 0.01 when the
+/// data's p-values and the replicates' are exchangeable. Over 200 standard labs (bumps: not
+/// Gaussian) the rejections stay below the binomial(200, 0.01) upper quantile at 1e-3: X <= 8
+/// (P(X > 8) = 2.1e-4, P(X > 7) = 1.0e-3; boost rounds outwards). A tail fitted to the replicates
+/// alone, without the data, broke the symmetry: 6.8% on the full standard lab
+/// (results/referee/README.md), 8 of 200 here, at the bound, so this test alone has little power
+/// against that bug; the study's 300 full labs per case resolve it.
+TEST(Compare, AtOneLookTheDataAreBeyondEveryReplicateOnceInAHundred) {
+  constexpr double kAlpha = 0.01;
+  constexpr int kWorlds = 200;
+  const double upper = boost::math::quantile(boost::math::complement(boost::math::binomial(kWorlds, kAlpha), 1e-3));
+  const std::string effects = std::string(kSystematic) + kBumps;
+  const auto dir = test::scratch_dir("referee_one_look");
+  int beyond = 0, rejected = 0;
+  for (int i = 0; i < kWorlds; ++i) {
+    const std::uint64_t seed = 5000 + static_cast<std::uint64_t>(i);
+    const Suite suite = standard_lab(effects, seed, dir / std::to_string(i));
+    CalibrationOptions c = simulation(seed + 1000003);
+    c.max_replicates = kFirstLookReplicates;
+    const Comparison r = compare(suite, suite_model(suite), kAlpha, c);
+    ASSERT_EQ(r.calibration.replicates, kFirstLookReplicates);
+    beyond += r.calibration.beyond_replicates ? 1 : 0;
+    rejected += r.verdict.inconsistent() ? 1 : 0;
+  }
+  std::printf("one look: %d of %d standard labs beyond every replicate, %d rejected (bound %g)\n", beyond, kWorlds,
+              rejected, upper);
+  EXPECT_EQ(rejected, beyond);
+  EXPECT_LE(beyond, upper);
 }
 
 }  // namespace
