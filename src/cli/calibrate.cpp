@@ -168,6 +168,14 @@ std::string report(const Suite& suite, const CalibrateResult& c, double alpha) {
   write_model(out, c);
   write_verdict(out, c, alpha);
   write_correction(out, c.odometry_correction);
+  if (!c.unresolved.empty()) {
+    out << "\nNot adopted and not ruled out:";
+    for (const std::string& e : c.unresolved) out << (e == c.unresolved.front() ? " " : ", ") << e;
+    out << ". The runs do not separate " << (c.unresolved.size() == 1 ? "it" : "them")
+        << " from the model's effects; the two blocks below count " << (c.unresolved.size() == 1 ? "its" : "their")
+        << " parameters beside the model's, so the next experiment is one that sizes "
+        << (c.unresolved.size() == 1 ? "it" : "them") << ".\n";
+  }
   out << design_report(c.confounded, c.next_experiments);
   if (c.holdout) write_holdout(out, *c.holdout);
   return out.str();

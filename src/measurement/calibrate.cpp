@@ -71,6 +71,33 @@ void joint_fit(const Suite& suite, const CalibrateOptions& options, DiagnoseProg
                    format_number(joint.log_likelihood, "%.6g");
 }
 
+/// Where the design (confounding, next experiments) is computed: the final model with its
+/// jointly fitted parameters, plus every effect the last round stopped because the runs do not
+/// separate it from the model's ("confounded"), at its fitted values, its parameters beside the
+/// model's. Such an effect is not in the model, but the runs cannot rule it out either: the
+/// next experiment should be the one that sizes it. The design then has no observed
+/// covariance (estimate_covariance uses the expected information).
+FitResult design_point(CalibrateResult& out) {
+  FitResult at = out.joint;
+  at.model = out.model;
+  if (out.rounds.empty()) return at;
+  auto in_model = [&](const std::string& name) {
+    return std::any_of(at.model.effects.begin(), at.model.effects.end(), [&](const EffectSpec& e) { return e.name == name; });
+  };
+  for (const Candidate& c : out.rounds.back().candidates) {
+    if (c.rule != "confounded" || c.robot) continue;
+    for (const EffectSpec& spec : c.model.effects) {
+      if (in_model(spec.name) || spec.name == "group_variation") continue;
+      const std::vector<std::string> fitted = effect_candidate(*info_of(spec)).fitted;
+      at.model.effects.push_back(spec);
+      at.names.insert(at.names.end(), fitted.begin(), fitted.end());
+      out.unresolved.push_back(spec.name);
+    }
+  }
+  if (!out.unresolved.empty()) at.covariance.resize(0, 0);
+  return at;
+}
+
 /// The final model's account: compare, residuals, corrected odometry, what the runs cannot
 /// separate and what to record next.
 void account(const Suite& suite, const CalibrateOptions& options, CalibrateResult& out) {
@@ -79,11 +106,10 @@ void account(const Suite& suite, const CalibrateOptions& options, CalibrateResul
   out.explained = c.verdict.consistent();
   if (!out.explained) out.residuals = residual_alignment(suite, out.model, residuals(suite, out.model));
   out.odometry_correction = odometry_correction(suite, out.model);
-  if (out.joint.names.empty()) return;
-  FitResult at_final = out.joint;
-  at_final.model = out.model;
-  out.confounded = confounded_pairs(out.joint.names, estimate_covariance(suite, at_final));
-  out.next_experiments = next_experiments(suite, at_final);
+  FitResult at = design_point(out);
+  if (at.names.empty()) return;
+  out.confounded = confounded_pairs(at.names, estimate_covariance(suite, at));
+  out.next_experiments = next_experiments(suite, at);
 }
 
 /// The model's covariance of the end-pose error after `length_m` of straight line at

@@ -83,6 +83,9 @@ struct CalibrateResult {
   bool explained = false;  // compare finds the final model consistent with the training runs
   std::vector<ResidualAlignment> residuals;  // when not explained
   std::optional<OdometryCorrection> odometry_correction;
+  /// Effects the last round stopped as confounded with the model's: not adopted, not ruled
+  /// out. `confounded` and `next_experiments` count their parameters beside the model's.
+  std::vector<std::string> unresolved;
   std::vector<ConfoundedPair> confounded;
   std::vector<NextExperiment> next_experiments;  // best first
   DiffDriveParameters diff_drive;
