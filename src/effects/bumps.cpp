@@ -148,12 +148,11 @@ EffectType bumps_type() {
            "Poisson impulses at rate per metre of mean wheel travel, each N(0, sigma^2) on one "
            "wheel",
            /*systematic=*/false,
-           /*heavy_tails=*/true, /*grouped=*/false,
-           // diagnose fits the rate only (a Gaussian likelihood sees rate sigma^2), completes
-           // sigma from the tails, and lets the kurtosis decide against the noise level.
+           /*grouped=*/false,
+           // diagnose fits the rate only (a Gaussian likelihood sees rate sigma^2) and completes
+           // sigma from the tails.
            /*diagnose_fitted=*/{"rate"},
            /*complete=*/complete_bumps,
-           /*confused_with=*/kWheelNoiseLevel,
            /*rescale_tails=*/[](EffectSpec& spec, double factor) {
              spec.values[1] *= factor;
              spec.values[0] /= factor * factor;

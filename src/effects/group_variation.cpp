@@ -87,7 +87,7 @@ EffectType group_variation_type() {
            "the runs' mean residuals cluster by group: runs of one group share an offset that "
            "differs between groups, beyond what the noise explains",
            "`parameter` (e.g. wheelbase_error.Eb) drawn once per group from N(value, sd^2)",
-           /*systematic=*/true, /*heavy_tails=*/false, /*grouped=*/true},
+           /*systematic=*/true, /*grouped=*/true},
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<GroupVariation>(v[0]);
           }};

@@ -18,8 +18,6 @@ CandidateType effect_candidate(const EffectInfo& info) {
   c.physics = info.physics;
   c.signature = info.signature;
   c.systematic = info.systematic;
-  c.heavy_tails = info.heavy_tails;
-  c.confused_with = info.confused_with;
   c.complete = info.complete;
   c.on_boundary = true;
   for (const EffectParameterInfo& p : info.parameters) {

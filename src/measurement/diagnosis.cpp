@@ -153,7 +153,6 @@ CandidateType group_candidate(const std::string& target, const EffectList& model
   c.physics = group.physics + ", varying " + target;
   c.signature = group.signature;
   c.systematic = group.systematic;
-  c.heavy_tails = group.heavy_tails;
   c.on_boundary = true;
   if (!find_spec(model, effect)) {
     const EffectInfo& varied = *find_effect(effect);

@@ -101,9 +101,6 @@ struct EffectInfo {
   /// True when the effect moves the mean (a systematic error: Ed, Eb, Es); false when it only
   /// adds randomness, which shows in the covariance (and the tails).
   bool systematic = false;
-  /// True when the effect makes the errors non-Gaussian (heavy tails): a model with it expects
-  /// the kurtosis compare tests for.
-  bool heavy_tails = false;
   /// True when the effect acts across the runs of a group (group_variation): it is not seen by
   /// one run alone, so the simulator of one path and the model of one run leave it out; synth
   /// draws it per group and the suite likelihood correlates the runs of a group (likelihood.hpp).
@@ -114,9 +111,6 @@ struct EffectInfo {
   std::vector<std::string> diagnose_fitted{};
   /// What completes the candidate after its fit (bumps: sigma from the tails); may be nullptr.
   CandidateCompletion complete = nullptr;
-  /// The candidate a Gaussian likelihood cannot tell this one apart from ("" for none): when both
-  /// are significant, heavy tails put the one with heavy_tails first, Gaussian tails the other.
-  std::string confused_with{};
   /// May be nullptr; see TailRescale.
   TailRescale rescale_tails = nullptr;
   /// How many standard-normal per-run constants the model carries for the effect

@@ -32,14 +32,12 @@ struct CandidateType {
   std::string effect;
   std::string physics, signature;  // plain words (EffectInfo)
   bool systematic = false;         // judged on the full likelihood, else on its scatter part
-  bool heavy_tails = false;
   /// The fit names it moves: "<effect>.<parameter>", or robot parameters ("k_left").
   std::vector<std::string> fitted;
   /// True when every fitted parameter's "no effect" value is the closed edge of its range (the
   /// LRT is then a 50:50 chi^2 mixture [Self87]).
   bool on_boundary = false;
   bool robot = false;  // moves robot parameters (its YAML is the robot line), not an effect
-  std::string confused_with;         // EffectInfo::confused_with
   CandidateCompletion complete = nullptr;
   /// Specs added to the model before the fit, at their starting values (a user candidate's
   /// given spec; a group candidate's varied effect when new, and group_variation). Empty: the
