@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <boost/math/distributions/chi_squared.hpp>
 #include <cmath>
 #include <cstdio>
 
@@ -209,6 +210,32 @@ TEST(Diagnose, ACandidateAtABoundOrConfoundedIsStopped) {
   const Candidate& again = candidate(twice, "another_scale");
   EXPECT_GT(again.confounded, kConfoundedCorrelation);
   if (again.significant) EXPECT_EQ(again.rule, "confounded");
+}
+
+TEST(Diagnose, ANestedRicherCandidateMustFitSignificantlyBetter) {
+  // A plain wheelbase error (tests/data/worlds/nested_wheelbase.yaml, a blind world) on which
+  // turn_dependent_wheelbase, which contains wheelbase_error (Eb_arc = Eb_spin), ranks first by
+  // delta BIC: its extra parameter gains 2.9 in log-likelihood. Wilks: 2 x 2.9 on 1 dof, p =
+  // 0.016, not significant at the per-candidate level, so the simpler effect is adopted.
+  const Suite lab = test::synth_suite(load_world(ODOMCOV_SOURCE_DIR "/tests/data/worlds/nested_wheelbase.yaml"), "nested");
+  const Diagnosis d = diagnose(lab, suite_model(lab), DiagnoseOptions{});
+  ASSERT_TRUE(d.best);
+  EXPECT_EQ(d.candidates[*d.best].effect, "wheelbase_error");
+  const Candidate& rich = candidate(d, "turn_dependent_wheelbase");
+  EXPECT_LT(rich.delta_bic, d.candidates[*d.best].delta_bic);  // it did rank first
+  EXPECT_EQ(rich.verdict, "stopped");
+  EXPECT_EQ(rich.rule, "nested");
+  const double p = boost::math::cdf(boost::math::complement(
+      boost::math::chi_squared(1), 2.0 * (rich.delta_log_likelihood - d.candidates[*d.best].delta_log_likelihood)));
+  EXPECT_GT(p, kDiagnoseAlpha / static_cast<double>(d.candidates.size()));
+  // The same lab with a true turn dependence (Eb_arc 1.004, Eb_spin 1.010): the richer effect
+  // fits significantly better and keeps its place.
+  WorldFile w = load_world(ODOMCOV_SOURCE_DIR "/tests/data/worlds/nested_wheelbase.yaml");
+  w.world.effects = {{"turn_dependent_wheelbase", {1.004, 1.010}}};
+  const Suite turn = test::synth_suite(w, "nested_turn");
+  const Diagnosis t = diagnose(turn, suite_model(turn), DiagnoseOptions{});
+  ASSERT_TRUE(t.best);
+  EXPECT_EQ(t.candidates[*t.best].effect, "turn_dependent_wheelbase");
 }
 
 TEST(Diagnose, TheNeesRuleAllowsSamplingError) {

@@ -19,18 +19,23 @@ class TurnDependentWheelbase final : public Effect {
   double arc_, spin_;
 };
 
+EffectInfo info() {
+  EffectInfo i{"turn_dependent_wheelbase",
+               {{"Eb_arc", "", 0.0, 1e300, true, false, 1.0, 1.005},
+                {"Eb_spin", "", 0.0, 1e300, true, false, 1.0, 1.01}},
+               "a wheelbase that depends on the kind of turn (tyre scrub moves the contact points)",
+               "heading error proportional to the angle turned, but at different rates on turns on "
+               "the spot and on wide arcs, so one wheelbase correction cannot fit both",
+               "true wheelbase per sample B (Eb_arc + (Eb_spin - Eb_arc) r)",
+               /*systematic=*/true};
+  i.contains = {"wheelbase_error"};  // Eb_arc = Eb_spin = Eb
+  return i;
+}
+
 }  // namespace
 
 EffectType turn_dependent_wheelbase_type() {
-  return {{"turn_dependent_wheelbase",
-           {{"Eb_arc", "", 0.0, 1e300, true, false, 1.0, 1.005},
-            {"Eb_spin", "", 0.0, 1e300, true, false, 1.0, 1.01}},
-           "a wheelbase that depends on the kind of turn (tyre scrub moves the contact points)",
-           "heading error proportional to the angle turned, but at different rates on turns on "
-           "the spot and on wide arcs, so one wheelbase correction cannot fit both",
-           "true wheelbase per sample B (Eb_arc + (Eb_spin - Eb_arc) r)",
-           /*systematic=*/true},
-          [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
+  return {info(), [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<TurnDependentWheelbase>(v[0], v[1]);
           }};
 }

@@ -19,6 +19,7 @@ CandidateType effect_candidate(const EffectInfo& info) {
   c.signature = info.signature;
   c.systematic = info.systematic;
   c.complete = info.complete;
+  c.contains = info.contains;
   c.on_boundary = true;
   for (const EffectParameterInfo& p : info.parameters) {
     const bool fitted = info.diagnose_fitted.empty() ||

@@ -726,6 +726,34 @@ double vuong_z(const Round& round, const Trial& a, const Trial& b) {
   return sd > 0 ? mean * std::sqrt(n) / sd : (mean == 0.0 ? 0.0 : std::copysign(kInfinity, mean));
 }
 
+/// The rule for nested candidates. A candidate that contains a simpler significant one
+/// (CandidateType::contains: it reduces to it exactly at some of its parameter values) is
+/// adopted over it only when it fits significantly better: the likelihood ratio of the two
+/// (both fitted on the same part of the likelihood, with the same nuisance), chi^2 with the
+/// difference of their free parameters [Wilks38], below the per-candidate level. Otherwise the
+/// simpler one, if it passes every rule, is adopted instead. Returns the adopted trial's index.
+std::size_t prefer_nested_simpler(Round& round, std::vector<Trial>& trials, std::size_t best, double per_candidate,
+                                  const ModelSummary& before, std::size_t runs) {
+  const std::vector<std::string>& contains = trials[best].type->contains;
+  for (std::size_t j = best + 1; j < trials.size() && trials[j].c.significant; ++j) {
+    const Candidate& simple = trials[j].c;
+    const int dof = trials[best].c.dof - simple.dof;
+    if (dof <= 0 || std::find(contains.begin(), contains.end(), trials[j].type->name) == contains.end()) continue;
+    const double ratio = 2.0 * (trials[best].c.delta_log_likelihood - simple.delta_log_likelihood);
+    const double p = ratio > 0 ? boost::math::cdf(boost::math::complement(boost::math::chi_squared(dof), ratio)) : 1.0;
+    if (p < per_candidate) continue;
+    round.check_cancel();
+    if (!judge(round, trials[j], per_candidate, before, runs)) continue;
+    const std::string tie = trials[best].c.effect + " contains " + simple.effect + " and fits only " +
+                            format_number(0.5 * ratio, "%.3g") + " better in log-likelihood (likelihood ratio p = " +
+                            format_number(p, "%.2g") + ", not significant at " + format_number(per_candidate, "%.2g") + ")";
+    stop(trials[best].c, "stopped", "nested", "not adopted: " + tie);
+    trials[j].c.decision += "; preferred because " + tie;
+    return j;
+  }
+  return best;
+}
+
 bool consistent_model(const Round& round, const SuiteModel& model, const CalibrationOptions& calibration) {
   return compare(round.suite, model, round.before.alpha, round.cache.at(model), calibration).verdict.consistent();
 }
@@ -865,6 +893,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   for (std::size_t i = 0; i < trials.size() && trials[i].c.significant && !d.best; ++i) {
     if (judge(round, trials[i], per_candidate, d.before, d.runs)) d.best = i;
   }
+  if (d.best) d.best = prefer_nested_simpler(round, trials, *d.best, per_candidate, d.before, d.runs);
   if (d.best) d.best = prefer_consistent_rival(round, trials, *d.best, per_candidate, d.before, d.runs, options.calibration);
   for (Trial& t : trials) d.candidates.push_back(std::move(t.c));
   if (progress) progress->fits_done = progress->fits_total.load();

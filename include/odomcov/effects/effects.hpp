@@ -124,6 +124,10 @@ struct EffectInfo {
   /// a planned path changes only at the first sample of each stretch of equal samples: the model
   /// then sets those samples apart as pieces of their own (path_model_pieces).
   bool uses_acceleration = false;
+  /// The catalogue effects this one reduces to exactly at some of its parameter values
+  /// (turn_dependent_wheelbase at Eb_arc = Eb_spin is wheelbase_error): diagnose adopts it over
+  /// one of them only when it fits significantly better (a likelihood ratio of nested models).
+  std::vector<std::string> contains{};
 };
 
 /// What predictions with a list of effects need beyond the encoder pieces and their durations.

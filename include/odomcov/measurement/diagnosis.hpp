@@ -38,6 +38,7 @@ struct CandidateType {
   /// LRT is then a 50:50 chi^2 mixture [Self87]).
   bool on_boundary = false;
   bool robot = false;  // moves robot parameters (its YAML is the robot line), not an effect
+  std::vector<std::string> contains;  // EffectInfo::contains
   CandidateCompletion complete = nullptr;
   /// Specs added to the model before the fit, at their starting values (a user candidate's
   /// given spec; a group candidate's varied effect when new, and group_variation). Empty: the
@@ -161,7 +162,8 @@ struct Candidate {
   /// (significant, ranked after the adopted one).
   std::string verdict = "not significant";
   /// The rule that stopped a stopped candidate or named a mimic: "parameter at bound",
-  /// "confounded", "covariance, not mean", "held-out likelihood", "NEES", "" otherwise.
+  /// "confounded", "covariance, not mean", "held-out likelihood", "NEES", "nested" (a simpler
+  /// candidate it contains fits as well), "consistency", "" otherwise.
   std::string rule;
   std::string decision;  // the verdict in plain words
   std::vector<std::string> at_bound;  // parameters its fit left at a bound (FitResult::at_bound)
