@@ -379,6 +379,29 @@ std::string confounded_world(const std::string& extra_name, std::int64_t extra_r
 
 double worst_stderr(const FitResult& f) { return f.stderrs.maxCoeff(); }
 
+TEST(Calibrate, ANestedEffectIsSimplifiedAfterTheRounds) {
+  // tests/data/worlds/nested_after.yaml (a blind world): a wheel diameter ratio and a plain
+  // wheelbase error. The first round adopts turn_dependent_wheelbase, whose arc part takes up
+  // the ratio's share of the arcs' heading; once the ratio is in, the turn dependence is not
+  // significant and the check after the rounds puts wheelbase_error in its place. Both
+  // parameters then lie within 3 standard errors of the world's.
+  const Suite lab = test::synth_suite(load_world(ODOMCOV_SOURCE_DIR "/tests/data/worlds/nested_after.yaml"), "nested_after");
+  CalibrateOptions options;
+  options.rounds = 3;
+  const CalibrateResult c = calibrate(lab, suite_model(lab), options);
+  ASSERT_FALSE(c.rounds.empty());
+  ASSERT_TRUE(c.rounds.front().best);
+  EXPECT_EQ(c.rounds.front().candidates[*c.rounds.front().best].effect, "turn_dependent_wheelbase");
+  ASSERT_EQ(c.simplified.size(), 1u);
+  EXPECT_EQ(c.named, (std::vector<std::string>{"wheelbase_error", "wheel_diameter_ratio"}));
+  ASSERT_EQ(c.joint.names, (std::vector<std::string>{"wheelbase_error.Eb", "wheel_diameter_ratio.Ed"}));
+  const double truth[] = {1.0046103, 1.0021668};
+  for (Eigen::Index k = 0; k < 2; ++k) EXPECT_NEAR(c.joint.values(k), truth[k], 3 * c.joint.stderrs(k)) << c.joint.names[static_cast<std::size_t>(k)];
+  // The standard lab's plain wheelbase, adopted as such: nothing to simplify.
+  const Suite standard = test::synth_suite(load_world(kStandard), "nested_none");
+  EXPECT_TRUE(calibrate(standard, suite_model(standard), options).simplified.empty());
+}
+
 TEST(Design, TheRecommendedExperimentReducesTheWorstStandardErrorMost) {
   // The next-experiment advice, checked the way a user would: each item of the menu is recorded
   // (synthesised from the same world), added to the suite and the two parameters refitted. The

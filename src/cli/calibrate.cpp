@@ -113,6 +113,7 @@ void write_rounds(std::ostream& out, const CalibrateResult& c) {
       out << "    - " << x.effect << ": " << x.decision << "\n";
     }
   }
+  for (const std::string& s : c.simplified) out << "  after the rounds: " << s << "\n";
 }
 
 void write_model(std::ostream& out, const CalibrateResult& c) {

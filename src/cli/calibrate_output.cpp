@@ -264,6 +264,7 @@ json calibrate_json(const Suite& suite, const SuiteModel& start, const Calibrate
               {"diff_drive", diff_drive_json(c.diff_drive)}};
   out.update(design_json(c.confounded, c.next_experiments));
   out["unresolved"] = c.unresolved;
+  out["simplified"] = c.simplified;
   out["joint_fit"] = c.joint.names.empty() ? json(nullptr) : fit_json(c.joint);
   if (!c.explained) out["residuals"] = residuals_json(c.residuals);
   if (c.holdout) {

@@ -1,6 +1,7 @@
 #include "odomcov/measurement/calibrate.hpp"
 
 #include <algorithm>
+#include <boost/math/distributions/chi_squared.hpp>
 #include <cmath>
 #include <map>
 
@@ -29,6 +30,59 @@ void run_rounds(const Suite& suite, const SuiteModel& start, const CalibrateOpti
 
 bool named_noise_level(const std::vector<std::string>& named) {
   return std::find(named.begin(), named.end(), kWheelNoiseLevel) != named.end();
+}
+
+/// True when a group_variation of `model` varies a parameter of `effect`.
+bool varied_by_group(const SuiteModel& model, const std::string& effect) {
+  return std::any_of(model.effects.begin(), model.effects.end(),
+                     [&](const EffectSpec& e) { return e.target.rfind(effect + ".", 0) == 0; });
+}
+
+/// The loop's model fitted on the full likelihood over every parameter joint_fit refits.
+FitResult fit_all(const Suite& suite, const SuiteModel& model, bool noise_level, const CalibrateOptions& options,
+                  DiagnoseProgress* progress, ResidualCache& cache) {
+  const std::vector<std::string> names = joint_parameters(model, noise_level);
+  std::atomic<std::int64_t>* counter = progress ? &progress->evaluations : nullptr;
+  const FitResult fast = fit(suite, model, names, Likelihood::full, counter, options.diagnose.path, &cache);
+  return refit_exactly(fast, names, Likelihood::full, counter, cache);
+}
+
+/// The nested rule once more, on the loop's model. An adopted effect that contains a simpler
+/// one (EffectInfo::contains) beat it against the model of its own round; an effect adopted
+/// later may explain what its extra parameters took up then (a wheel diameter ratio's share of
+/// the arcs' heading, taken up by a turn-dependent wheelbase before the ratio was in). With
+/// every effect refitted, it is replaced by the simpler one unless Wilks's likelihood ratio of
+/// the two is significant at the level of its round's decision (alpha over the candidates).
+void simplify_nested(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
+                     CalibrateResult& out) {
+  if (out.rounds.empty()) return;
+  const double level = options.diagnose.alpha / static_cast<double>(std::max<std::size_t>(1, out.rounds.back().candidates.size()));
+  const bool noise = named_noise_level(out.named);
+  ResidualCache cache(suite);
+  for (std::size_t i = 0; i < out.loop_model.effects.size(); ++i) {
+    const EffectSpec rich = out.loop_model.effects[i];
+    const EffectInfo* info = info_of(rich);
+    if (!info || varied_by_group(out.loop_model, rich.name)) continue;
+    for (const std::string& simpler : info->contains) {
+      const EffectInfo* s = find_effect(simpler);
+      if (!s || find_spec(out.loop_model.effects, simpler)) continue;
+      SuiteModel start = out.loop_model;
+      start.effects[i] = EffectSpec{simpler, {}};
+      for (const EffectParameterInfo& p : s->parameters) start.effects[i].values.push_back(p.neutral);
+      const FitResult with_rich = fit_all(suite, out.loop_model, noise, options, progress, cache);
+      const FitResult with_simple = fit_all(suite, start, noise, options, progress, cache);
+      const int dof = static_cast<int>(with_rich.names.size() - with_simple.names.size());
+      const double ratio = 2.0 * (with_rich.log_likelihood_after - with_simple.log_likelihood_after);
+      const double p = ratio > 0 ? boost::math::cdf(boost::math::complement(boost::math::chi_squared(std::max(1, dof)), ratio)) : 1.0;
+      if (p < level || !with_simple.at_bound.empty()) continue;
+      out.simplified.push_back(rich.name + " replaced by " + simpler + ", which it contains: with every effect refitted it fits only " +
+                               format_number(0.5 * ratio, "%.3g") + " better in log-likelihood (likelihood ratio p = " +
+                               format_number(p, "%.2g") + ", not significant at " + format_number(level, "%.2g") + ")");
+      std::replace(out.named.begin(), out.named.end(), rich.name, simpler);
+      out.loop_model = with_simple.model;
+      break;
+    }
+  }
 }
 
 /// The joint fit of everything in the loop's model, on the full likelihood; kept as the final
@@ -199,6 +253,7 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
   CalibrateResult out;
   run_rounds(suite, start, options, progress, out);
   if (progress && progress->cancel.load()) throw Cancelled();
+  simplify_nested(suite, options, progress, out);
   joint_fit(suite, options, progress, out);
   account(suite, options, out);
   out.model.domain = training_domain(suite, out.model.robot.wheelbase_m);

@@ -69,7 +69,11 @@ DiffDriveParameters diff_drive_parameters(const Suite& suite, const SuiteModel& 
 
 struct CalibrateResult {
   std::vector<Diagnosis> rounds;
-  std::vector<std::string> named;  // the adopted candidates, in order
+  /// The adopted candidates, in order; an effect the final nested check replaced by a simpler
+  /// one it contains (`simplified`) under the simpler one's name.
+  std::vector<std::string> named;
+  /// The final nested check's replacements, in words (after the rounds, before the joint fit).
+  std::vector<std::string> simplified;
   SuiteModel loop_model;           // the model after the last adoption (everything refitted)
   /// The joint fit of every fitted parameter of the final model's effects (and the wheel
   /// noise when wheel_noise_level was adopted) on the full likelihood.
