@@ -109,6 +109,7 @@ def compare(odomcov, suite, alpha, calibration, seed, out):
     with open(out) as f:
         d = json.load(f)
     return {"verdict": d["verdict"], "p_value": d["p_value"], "replicates": d["replicates"],
+            "reference_replicates": d.get("reference_replicates"),
             "close_call": d["close_call"], "beyond": d["beyond_replicates"]}
 
 

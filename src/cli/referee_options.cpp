@@ -49,10 +49,10 @@ std::string calibration_text(const Calibration& c) {
   }
   std::string text = "calibrated by simulating the model's world (" + c.reason + "): B = " +
                      std::to_string(c.replicates) + " replicates (seed " + std::to_string(c.seed) +
-                     "), family-wise p = " + format_number(c.p_value, "%.3g");
+                     "; each test's reference from " + std::to_string(c.reference_replicates) +
+                     " more), family-wise p = " + format_number(c.p_value, "%.3g");
   if (c.beyond_replicates) {
-    text += " (beyond every replicate: the tail model's, below the resolution " +
-            format_number(c.resolution, "%.2g") + ")";
+    text += " (beyond every replicate; resolution " + format_number(c.resolution, "%.2g") + ")";
   } else {
     text += " +/- " + format_number(c.p_mc_error, "%.2g") + " (Monte-Carlo; resolution " +
             format_number(c.resolution, "%.2g") + ")";
@@ -71,6 +71,7 @@ nlohmann::json calibration_json(const Calibration& c) {
   return {{"calibration", calibration_name(c.method)},
           {"calibration_reason", c.reason},
           {"replicates", or_null(c.replicates)},
+          {"reference_replicates", or_null(c.reference_replicates)},
           {"seed", or_null(c.seed)},
           {"tests", c.tests},
           {"p_value", c.p_value},

@@ -6,7 +6,6 @@
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
 #include <algorithm>
-#include <boost/math/distributions/beta.hpp>
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/normal.hpp>
 #include <boost/math/distributions/students_t.hpp>
@@ -18,6 +17,7 @@
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/domain.hpp"
 #include "odomcov/measurement/referee.hpp"
+#include "odomcov/measurement/sequential_test.hpp"
 
 namespace odomcov {
 namespace {
@@ -530,59 +530,49 @@ struct ParetoTail {
   }
 };
 
-/// One tail of a test's distribution in the model's world, from the n = B + 1 scores of the
-/// data and the replicates: the p-value of one of those scores, x, is the share of the n scores
-/// at or above it, and for x among the N + 1 largest (N = max(10, n/10)) a generalised Pareto
-/// tail beyond the (N + 1)-th largest of the *other* n - 1 scores, fitted to the N above it
-/// (ParetoTail; for small permutation p-values, [Knijnenburg09]).
-/// Each score is left out of its own fit, the data's and every replicate's alike: the p-value
-/// is the same function of a score and the other n - 1 for every row, so under the model the
-/// data's p-values and the replicates' are exchangeable and the min-P test built on them is
-/// exact; and a far misfit does not widen its own reference. (A first version left out the
-/// data only: a replicate's largest score was then in its own fit, which fattened its tail,
-/// and the data's never was, and correct worlds were rejected 6 to 8% of the time at 1%,
-/// results/referee/README.md.)
+/// One tail of a test's distribution in the model's world, from the n scores of the reference
+/// replicates (kReferenceReplicates, simulated apart: neither the data nor any replicate the data
+/// are ranked against is among them). The p-value of a score x is the share of the reference at
+/// or above it, (1 + #{>= x})/(n + 1), and beyond the (N + 1)-th largest (N = max(10, n/10)) a
+/// generalised Pareto tail fitted to the N above it (ParetoTail; for small permutation p-values,
+/// [Knijnenburg09]). The reference is fixed before the data are ranked, so a p-value is the same
+/// function of its score for the data and for every replicate, at every look: the min-P
+/// statistic built on them is a fixed statistic, the condition of the sequential Monte-Carlo
+/// test (SequentialMcTest). A far misfit does not widen its own reference. (Earlier versions
+/// fitted each tail to the data and the replicates themselves: first the replicates alone, so
+/// a replicate's largest score was in its own fit and the data's never, and correct worlds
+/// were rejected 6 to 8% of the time at 1%; then every score left out of its own fit, exact at
+/// one look but a reference that moved between looks, results/referee/README.md.)
 struct Tail {
-  std::vector<double> sorted;  // every score (data and replicates), descending
+  std::vector<double> sorted;  // the reference's scores, descending
   std::size_t exceedances = 0;  // N
+  std::optional<ParetoTail> pareto;
 
-  /// `scores`: the data's and the replicates', in any order.
   explicit Tail(std::vector<double> scores) : sorted(std::move(scores)) {
     std::sort(sorted.begin(), sorted.end(), std::greater<>());
     const std::size_t n = sorted.size();
     exceedances = n < 4 ? 0 : std::min(n - 3, std::max<std::size_t>(kMinExceedances, n / 10));
+    if (exceedances < 2) return;
+    const ParetoTail t(sorted.data(), exceedances + 1);
+    if (t.ok) pareto = t;
   }
-  /// The fitted tail of the scores other than x (one of them), when x is among the N + 1
-  /// largest and beyond that tail's threshold.
-  std::optional<ParetoTail> tail_without(double x) const {
-    if (exceedances < 2 || x < sorted[exceedances]) return std::nullopt;
-    // The N + 2 largest less x: the N + 1 largest of the others.
-    std::vector<double> others(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(exceedances + 2));
-    const auto self = std::find(others.begin(), others.end(), x);
-    others.erase(self != others.end() ? self : others.end() - 1);  // x not a score: the N + 1 largest
-    const ParetoTail t(others.data(), others.size());
-    if (!t.ok || !(x > t.threshold)) return std::nullopt;
-    return t;
-  }
-  /// The share of the n scores above the threshold (x among them).
-  double share_above(double threshold) const {
-    const auto above = std::upper_bound(sorted.begin(), sorted.end(), threshold, std::greater<>()) - sorted.begin();
-    return static_cast<double>(above) / static_cast<double>(sorted.size());
-  }
-  /// P(score >= x) for x one of the n scores.
+  double n() const { return static_cast<double>(sorted.size()); }
+  /// The share of the reference and x above the tail's threshold, x among them.
+  double share_above_threshold() const { return static_cast<double>(exceedances + 1) / (n() + 1); }
+  bool in_tail(double x) const { return pareto && x > pareto->threshold; }
+  /// P(score >= x) in the model's world.
   double p(double x) const {
-    if (const std::optional<ParetoTail> t = tail_without(x)) return share_above(t->threshold) * t->survival(x);
+    if (in_tail(x)) return share_above_threshold() * pareto->survival(x);
     const auto k = std::upper_bound(sorted.begin(), sorted.end(), x, std::greater<>()) - sorted.begin();
-    return std::max(1.0, static_cast<double>(k)) / static_cast<double>(sorted.size());
+    return (1.0 + static_cast<double>(k)) / (n() + 1);
   }
   /// Its Monte-Carlo standard error: binomial in the bulk; in the tail the delta method of an
   /// exponential tail, relative error sqrt((1 + ln^2(q/p))/N) with q the share above the
   /// threshold.
   double mc_error(double x) const {
     const double pv = p(x);
-    const std::optional<ParetoTail> t = tail_without(x);
-    if (!t) return std::sqrt(pv * (1 - pv) / static_cast<double>(sorted.size()));
-    const double log_ratio = std::log(share_above(t->threshold) / pv);
+    if (!in_tail(x)) return std::sqrt(pv * (1 - pv) / n());
+    const double log_ratio = std::log(share_above_threshold() / pv);
     return pv * std::sqrt((1.0 + log_ratio * log_ratio) / static_cast<double>(exceedances));
   }
   static constexpr std::size_t kMinExceedances = 10;
@@ -626,56 +616,77 @@ double calibrated_p_error(double score, std::size_t j, const Reference& ref, con
   return 2.0 * (upper ? ref.upper[j].mc_error(score) : ref.lower[j].mc_error(-score));
 }
 
-/// The smallest calibrated p-value of each row.
-std::vector<double> row_minima(const ScoreTable& t, const Reference& ref, const TestLayout& layout) {
-  std::vector<double> out(t.rows(), 1.0);
-  for (std::size_t r = 0; r < t.rows(); ++r) {
+/// The smallest calibrated p-value of each row from `first` on, appended to `out`.
+void append_row_minima(const ScoreTable& t, std::size_t first, const Reference& ref, const TestLayout& layout,
+                       std::vector<double>& out) {
+  for (std::size_t r = first; r < t.rows(); ++r) {
+    double m = 1.0;
     for (std::size_t j = 0; j < t.cols; ++j) {
-      if (layout.valid[j]) out[r] = std::min(out[r], calibrated_p(t.row(r)[j], j, ref, layout));
+      if (layout.valid[j]) m = std::min(m, calibrated_p(t.row(r)[j], j, ref, layout));
     }
+    out.push_back(m);
   }
-  return out;
 }
 
-/// Resampling risk per look: each look's Clopper-Pearson interval has level 1 - kRiskPerLook.
+/// The risk per look of stopping to accept a verdict that more replicates would reverse: a look
+/// accepts when the Clopper-Pearson interval of level 1 - kRiskPerLook lies above alpha.
 constexpr double kRiskPerLook = 1e-3;
+/// The share of alpha spent on the tail model: beyond every replicate the data are rejected when
+/// the Bonferroni bound K m of their smallest p-value is at most kTailShare alpha; the ranks
+/// spend the rest, (1 - kTailShare) alpha, over the looks.
+constexpr double kTailShare = 0.1;
 
-/// The family-wise p-value of a p-value `p` among the replicates' minima (sorted, rows 1..B):
-/// (1 + k)/(B + 1) with k the replicates at or below it; when none is, the tail model
-/// min(1/(B + 1), tests p) (Bonferroni over the calibrated tests).
-double family_p(double p, const std::vector<double>& sorted_minima, int tests, bool* beyond = nullptr) {
-  const auto B = static_cast<double>(sorted_minima.size());
-  const auto k = static_cast<double>(std::upper_bound(sorted_minima.begin(), sorted_minima.end(), p) -
-                                     sorted_minima.begin());
-  if (beyond) *beyond = k == 0;
-  if (k == 0) return std::min(1.0 / (B + 1), tests * p);
-  return (1 + k) / (B + 1);
-}
+/// The family-wise test of the smallest p-value at the current look: the sequential Monte-Carlo
+/// test of its rank among the replicates' smallest p-values, and beyond every replicate the tail
+/// model, combined by weighted Bonferroni.
+struct FamilyTest {
+  SequentialMcTest ranks;  // at (1 - kTailShare) alpha
+  int tests = 0;           // K
+  double alpha = 0.0;
+  std::size_t look = 0;
+  std::vector<double> sorted;  // the replicates' smallest p-values at this look, ascending
 
-/// Clopper-Pearson interval of a binomial proportion, k of n, at level 1 - risk.
-void clopper_pearson(double k, double n, double risk, double out[2]) {
-  out[0] = k > 0 ? boost::math::quantile(boost::math::beta_distribution<>(k, n - k + 1), risk / 2) : 0.0;
-  out[1] = k < n ? boost::math::quantile(boost::math::beta_distribution<>(k + 1, n - k), 1 - risk / 2) : 1.0;
-}
+  std::int64_t below(double m) const {
+    return std::upper_bound(sorted.begin(), sorted.end(), m) - sorted.begin();
+  }
+  bool tail_rejects(double m) const { return below(m) == 0 && tests * m <= kTailShare * alpha; }
+  /// The family-wise p-value of a smallest p-value m: at most alpha exactly when the look rejects.
+  double p(double m) const {
+    const std::int64_t k = below(m);
+    double out = ranks.p_value(look, k) / (1 - kTailShare);
+    if (k == 0) out = std::min(out, tests * m / kTailShare);
+    return std::min(1.0, out);
+  }
+  /// The smallest p-values that the look rejects are those below this.
+  double critical() const {
+    const std::int64_t c = ranks.critical(look);
+    if (c < 0) return std::min(kTailShare * alpha / tests, sorted.front());
+    return c < static_cast<std::int64_t>(sorted.size()) ? sorted[static_cast<std::size_t>(c)] : 1.0;
+  }
+};
 
-/// The family-wise p-value of the data at the current B, its interval and whether the verdict
-/// at alpha is decided.
-bool look(const std::vector<double>& minima, int tests, double alpha, Calibration& cal,
-          std::vector<double>& sorted) {
-  sorted.assign(minima.begin() + 1, minima.end());
-  std::sort(sorted.begin(), sorted.end());
-  const auto B = static_cast<double>(sorted.size());
-  cal.replicates = static_cast<std::int64_t>(sorted.size());
+/// Look j after the replicates whose smallest p-values are minima[1..]: the data's (minima[0])
+/// family-wise p-value, its interval; whether the verdict is decided (rejected, clearly
+/// accepted, or the last look).
+bool look(const std::vector<double>& minima, std::size_t j, FamilyTest& family, Calibration& cal) {
+  family.look = j;
+  family.sorted.assign(minima.begin() + 1, minima.end());
+  std::sort(family.sorted.begin(), family.sorted.end());
+  const auto B = static_cast<double>(family.sorted.size());
+  const std::int64_t k = family.below(minima[0]);
+  const auto kd = static_cast<double>(k);
+  cal.replicates = static_cast<std::int64_t>(family.sorted.size());
   cal.resolution = 1.0 / (B + 1);
-  cal.p_value = family_p(minima[0], sorted, tests, &cal.beyond_replicates);
-  const auto k = static_cast<double>(std::upper_bound(sorted.begin(), sorted.end(), minima[0]) - sorted.begin());
-  clopper_pearson(k, B, kRiskPerLook, cal.p_interval);
-  cal.p_mc_error = std::sqrt(k / B * (1 - k / B) / B);
-  ++cal.looks;
-  if (cal.p_interval[1] < alpha || cal.p_interval[0] > alpha) return true;
-  // Beyond every replicate the tail model decides: conservative (an exponential tail at the
-  // lightest), it errs towards continuing.
-  return cal.beyond_replicates && cal.p_value <= alpha;
+  cal.p_value = family.p(minima[0]);
+  cal.beyond_replicates = k == 0;
+  clopper_pearson(kd, B, kRiskPerLook, cal.p_interval);
+  cal.p_mc_error = std::sqrt(kd / B * (1 - kd / B) / B);
+  cal.looks = static_cast<int>(j) + 1;
+  const bool tail = family.tail_rejects(minima[0]);
+  const SequentialMcTest::Decision d = family.ranks.decide(j, k, kRiskPerLook, family.alpha);
+  const bool last = j + 1 == family.ranks.looks().size();
+  cal.close_call = last && !tail && cal.p_interval[0] <= family.alpha && family.alpha <= cal.p_interval[1];
+  return tail || d != SequentialMcTest::Decision::go_on;
 }
 
 /// Simulates replicates [first, last) of the model's world and appends their scores.
@@ -697,18 +708,17 @@ void simulate_scores(const ModelWorld& world, const Prepared& p, const TestLayou
   }
 }
 
-/// Each test's calibrated p-value and family-wise p-value, with their Monte-Carlo errors; the
-/// critical p-value per test.
+/// Each test's calibrated p-value and family-wise p-value (as if its p-value were the data's
+/// smallest), with their Monte-Carlo errors; the critical p-value per test.
 void calibrate_tests(const ScoreTable& table, const Reference& ref, const TestLayout& layout,
-                     const std::vector<double>& sorted, double alpha, Comparison& out) {
-  const int K = out.calibration.tests;
-  const double B = static_cast<double>(sorted.size());
+                     const FamilyTest& family, Comparison& out) {
+  const double B = static_cast<double>(family.sorted.size());
   auto fill = [&](std::size_t j, TestResult& t, CalibratedTest& c) {
     if (!layout.valid[j] || !t.valid) return;
     c.p_gaussian = t.p_value;
     t.p_value = calibrated_p(table.row(0)[j], j, ref, layout);
     c.p_mc_error = calibrated_p_error(table.row(0)[j], j, ref, layout);
-    c.p_family = family_p(t.p_value, sorted, K);
+    c.p_family = family.p(t.p_value);
     c.p_family_mc_error = std::sqrt(c.p_family * (1 - c.p_family) / B);
   };
   const std::size_t E = out.experiments.size();
@@ -717,57 +727,53 @@ void calibrate_tests(const ScoreTable& table, const Reference& ref, const TestLa
     fill(2 * e + 1, out.experiments[e].cov_test, out.experiments[e].cov_calibration);
   }
   fill(2 * E, out.kurtosis, out.kurtosis_calibration);
-  // A test fails when its p_family <= alpha: its p-value below the k_alpha-th smallest replicate
-  // minimum, k_alpha = floor(alpha (B + 1)); with k_alpha = 0, the tail model's alpha/K.
-  const auto k_alpha = static_cast<std::size_t>(std::floor(alpha * (B + 1) + 1e-9));
-  out.alpha_per_test = k_alpha >= 1 ? sorted[std::min(k_alpha, sorted.size()) - 1]
-                                    : std::min(alpha / K, sorted.front());
+  // A test fails when its p_family <= alpha, i.e. when its p-value is below the critical one.
+  out.alpha_per_test = family.critical();
 }
 
-/// The look after B replicates: B + 1 doubled, and a look at B + 1 = 1/alpha (rounded up), the
-/// first B at which the Monte-Carlo test can reject with no replicate beyond the data; at most
-/// `cap`.
-std::int64_t next_look(std::int64_t B, std::int64_t cap, double alpha) {
-  std::int64_t next = std::min(cap, 2 * (B + 1) - 1);
-  const double resolving = std::ceil(1.0 / alpha - 1e-9) - 1.0;
-  if (static_cast<double>(B) < resolving && resolving < static_cast<double>(next)) {
-    next = static_cast<std::int64_t>(resolving);
-  }
-  return next;
+/// The looks: after 99, 199, 399, ... replicates (B + 1 doubling), the last at the cap.
+std::vector<std::int64_t> look_schedule(std::int64_t cap) {
+  std::vector<std::int64_t> looks{std::min(kFirstLookReplicates, cap)};
+  while (looks.back() < cap) looks.push_back(std::min(cap, 2 * (looks.back() + 1) - 1));
+  return looks;
 }
 
-/// Calibrates `out`'s tests by the model's world (ModelWorld): looks after 99, 199, 399, ...
-/// replicates until the verdict at alpha is decided or B reaches the cap. Returns the kurtosis
-/// score's median in the model's world (0 for a Gaussian world).
+/// Calibrates `out`'s tests by the model's world (ModelWorld): each test's reference from
+/// kReferenceReplicates replicates, then the data ranked against replicates drawn apart, with a
+/// look after 99, 199, 399, ... of them until the sequential test decides or B reaches the cap.
+/// Returns the kurtosis score's median in the model's world (0 for a Gaussian world).
 double referee(const Suite& suite, const SuiteModel& model, const Prepared& p, const TestLayout& layout,
                const Vector3* data_errors, const CalibrationOptions& options, Comparison& out) {
   const ModelWorld world(suite, model, options.seed);
+  const std::vector<std::int64_t> looks = look_schedule(std::max<std::int64_t>(1, options.max_replicates));
+  if (options.progress) options.progress->target = kReferenceReplicates + looks.front();
+  ScoreTable reference_scores;
+  reference_scores.cols = layout.size();
+  simulate_scores(world, p, layout, 0, kReferenceReplicates, reference_scores, options.progress);
+  const Reference ref = reference(reference_scores, layout);
   ScoreTable table;
   table.cols = layout.size();
   table.values.resize(table.cols);
   Workspace ws;
   scores(p, layout, data_errors, ws, table.values.data());
+  std::vector<double> minima;
+  append_row_minima(table, 0, ref, layout, minima);
   Calibration& cal = out.calibration;
   cal.method = CalibrationMethod::simulation;
   cal.seed = options.seed;
   cal.tests = layout.count();
   cal.risk_per_look = kRiskPerLook;
-  std::vector<double> sorted;
-  Reference ref;
-  const std::int64_t cap = std::max<std::int64_t>(1, options.max_replicates);
-  for (std::int64_t B = 0, next = std::min(kFirstLookReplicates, cap);;) {
-    if (options.progress) options.progress->target = next;
-    simulate_scores(world, p, layout, B, next, table, options.progress);
-    B = next;
-    ref = reference(table, layout);
-    const bool decided = look(row_minima(table, ref, layout), cal.tests, out.alpha, cal, sorted);
-    if (decided || B == cap) {
-      cal.close_call = !decided;
-      break;
-    }
-    next = next_look(B, cap, out.alpha);
+  cal.reference_replicates = kReferenceReplicates;
+  FamilyTest family{SequentialMcTest(looks, out.alpha * (1 - kTailShare)), cal.tests, out.alpha, 0, {}};
+  for (std::size_t j = 0; j < looks.size(); ++j) {
+    const std::int64_t B = j > 0 ? looks[j - 1] : 0;
+    if (options.progress) options.progress->target = kReferenceReplicates + looks[j];
+    simulate_scores(world, p, layout, kReferenceReplicates + B, kReferenceReplicates + looks[j], table,
+                    options.progress);
+    append_row_minima(table, minima.size(), ref, layout, minima);
+    if (look(minima, j, family, cal)) break;
   }
-  calibrate_tests(table, ref, layout, sorted, out.alpha, out);
+  calibrate_tests(table, ref, layout, family, out);
   return ref.median[2 * out.experiments.size()];
 }
 

@@ -16,9 +16,10 @@ namespace odomcov {
 /// What one test's p-values are under the calibration in use.
 struct CalibratedTest {
   double p_gaussian = 1.0;  // against the Gaussian reference (the fast path's p-value)
-  /// Family-wise: with the simulation, the share of replicates whose smallest p-value is at or
-  /// below this test's (1 + k)/(B + 1), or the tail model when no replicate reaches it; with the
-  /// Gaussian reference, Bonferroni. The test fails when it is at or below alpha.
+  /// Family-wise: with the simulation, the family-wise p-value the data would have were this
+  /// test's p-value their smallest (Calibration::p_value, from the k replicates whose smallest
+  /// p-value is at or below it, and the tail model when k = 0); with the Gaussian reference,
+  /// Bonferroni. The test fails when it is at or below alpha.
   double p_family = 1.0;
   double p_mc_error = 0.0;         // Monte-Carlo standard error of the test's p_value
   double p_family_mc_error = 0.0;  // and of p_family (binomial)
@@ -84,8 +85,11 @@ struct Failure {
 enum class CalibrationMethod { automatic, gaussian, simulation };
 const char* calibration_name(CalibrationMethod method);  // "automatic", "gaussian", "simulation"
 
-/// Replicates: the simulation looks after 99, 199, 399, 799, ... replicates (B + 1 = 100 2^i)
-/// and stops when the verdict at alpha is decided; kDefaultReplicates caps B.
+/// Replicates: kReferenceReplicates make each test's reference; the data are then ranked against
+/// replicates drawn apart, with a look after 99, 199, 399, 799, ... of them (B + 1 = 100 2^i),
+/// until the sequential test decides (docs/diagnose.md, "How many replicates");
+/// kDefaultReplicates caps B.
+inline constexpr std::int64_t kReferenceReplicates = 99;
 inline constexpr std::int64_t kFirstLookReplicates = 99;
 inline constexpr std::int64_t kDefaultReplicates = 1599;
 inline constexpr std::int64_t kMaxReplicates = 1'000'000;
@@ -109,27 +113,30 @@ struct CalibrationOptions {
 struct Calibration {
   CalibrationMethod method = CalibrationMethod::gaussian;  // gaussian or simulation
   std::string reason;       // why, in plain words
-  std::int64_t replicates = 0;  // B (simulation)
+  std::int64_t replicates = 0;  // B (simulation): the replicates the data are ranked against
+  std::int64_t reference_replicates = 0;  // those, apart, that make each test's reference
   std::uint64_t seed = 0;
   int tests = 0;            // valid tests in the family
-  double p_value = 1.0;     // family-wise p-value of the verdict
+  /// Family-wise p-value of the verdict: with the simulation, the sequential test's stagewise
+  /// p-value of the data's rank and, beyond every replicate, the tail model's, combined.
+  double p_value = 1.0;
   double p_mc_error = 0.0;  // its Monte-Carlo standard error
   double p_interval[2] = {1.0, 1.0};  // Clopper-Pearson interval of the exceedance probability
   double resolution = 0.0;  // 1/(B + 1): the smallest p-value the replicates resolve
-  /// The data are more extreme than every replicate: p_value is the tail model's (Bonferroni
-  /// over the tests' standardised p-values), below the resolution.
+  /// The data are more extreme than every replicate: p_value is then also bounded by the tail
+  /// model (Bonferroni over the tests' standardised p-values).
   bool beyond_replicates = false;
-  /// The verdict is within Monte-Carlo error of alpha at the largest B allowed.
+  /// At the largest B allowed, the interval of the exceedance probability still contains alpha.
   bool close_call = false;
-  double risk_per_look = 0.0;  // the Clopper-Pearson interval's level: 1 - risk
+  double risk_per_look = 0.0;  // a look accepts when the interval of level 1 - risk lies above alpha
   int looks = 0;
 };
 
 struct Comparison {
   double alpha = 0.0;  // family-wise level of the suite
   /// The p-value below which one test fails: Bonferroni, alpha over 2 tests per experiment and
-  /// the kurtosis (Gaussian); with the simulation, the alpha-quantile of the replicates'
-  /// smallest p-value (the min-P critical value).
+  /// the kurtosis (Gaussian); with the simulation, the min-P critical value: the smallest
+  /// p-values below it have a family-wise p-value at or below alpha at the look that decided.
   double alpha_per_test = 0.0;
   std::vector<ExperimentComparison> experiments;
   TestResult kurtosis;  // Mardia's b2, each experiment standardised by its own covariance
