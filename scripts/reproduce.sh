@@ -112,12 +112,16 @@ if want optiodom; then
     "dec_to_jun --train ^[a-z]+-2312 --test ^[a-z]+-(2306|2506)"
     "jun_to_dec --train ^[a-z]+-(2306|2506) --test ^[a-z]+-2312"
   )
-  calib() {  # NAME SUITE_DIR [calibrate options]: calibrate_NAME.txt, .json (and .png unless custom/day)
+  # calib NAME SUITE_DIR [calibrate options]: the report calibrate_NAME.txt; for the study's own
+  # splits (not the _custom and _day variants, whose figures custom.md and group.md tabulate)
+  # also calibrate_NAME.json and the plot calibrate_NAME.png.
+  calib() {
     local name=$1 from=$2 dir="$suite-calibrate-$1"
     shift 2
     save "$out/calibrate_$name.txt" "$odomcov" calibrate "$from/suite.yaml" --out "$dir" "$@"
+    [[ $name == *_custom || $name == *_day ]] && return
     cp "$dir/calibrate.json" "$out/calibrate_$name.json"
-    [[ $name == *_custom || $name == *_day ]] || "$python" scripts/plot_loop.py "$dir" --out "$out/calibrate_$name.png"
+    "$python" scripts/plot_loop.py "$dir" --out "$out/calibrate_$name.png"
   }
   # The same recordings grouped by recording day instead of by session (below).
   import_sessions "$suite-day" --group day "$data"/square/* "$data"/ivanjko/* "$data"/circular/* \
@@ -148,11 +152,11 @@ if want optiodom; then
   for split in "${splits[@]}"; do
     n=${split%% *}
     names+=("$n=$out/calibrate_$n.json")
-    custom+=("$n=$out/calibrate_$n.json" "${n}_custom=$out/calibrate_${n}_custom.json")
+    custom+=("$n=$out/calibrate_$n.json" "${n}_custom=$suite-calibrate-${n}_custom")
   done
   save "$out/summary.md" "$python" scripts/loop_summary.py "${names[@]}"
   save "$out/custom.md" "$python" scripts/loop_summary.py "${custom[@]}"
   save "$out/group.md" "$python" scripts/loop_summary.py "all (session groups)=$out/calibrate_all.json" \
-    "all (day groups)=$out/calibrate_all_day.json"
+    "all (day groups)=$suite-calibrate-all_day"
 fi
 echo "results regenerated in $results" >&2
