@@ -6,7 +6,7 @@
 # ("ft") and the corpus size, and where any crash input went. Exit status 1 if any target crashed.
 #   scripts/fuzz.sh [SECONDS] [TARGET...]
 # With ODOMCOV_FUZZ_JOBS=N, N targets run at the same time (each still for SECONDS of wall time);
-# the default 1 runs them one after another.
+# the default 1 runs them one after another. The build uses ODOMCOV_FUZZ_BUILD_JOBS jobs (2).
 set -u
 cd "$(dirname "$0")/.."
 seconds=${1:-60}
@@ -25,7 +25,7 @@ if [ ${#targets[@]} -eq 0 ]; then
     [ "$t" = util ] || targets+=("$t")
   done
 fi
-cmake --build "$build" --target $(printf 'fuzz_%s ' "${targets[@]}") >/dev/null || { echo "fuzz.sh: build failed"; exit 2; }
+cmake --build "$build" --parallel "${ODOMCOV_FUZZ_BUILD_JOBS:-2}" --target $(printf 'fuzz_%s ' "${targets[@]}") >/dev/null || { echo "fuzz.sh: build failed"; exit 2; }
 
 jobs=${ODOMCOV_FUZZ_JOBS:-1}
 fuzz_one() {  # target -> its result line in $build/result_<target>.txt

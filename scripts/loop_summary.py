@@ -1,51 +1,62 @@
 #!/usr/bin/python3
-"""One table across several scripts/diagnose_loop.py runs (e.g. the OptiOdom splits): per run,
-the effects named with the joint fit's sizes and standard errors, the NEES per path type
-in-sample and on the held-out runs, the heading bias per path type, and the verdict.
+"""One Markdown table across several `odomcov calibrate` runs (e.g. the OptiOdom splits), from
+their calibrate.json files (docs/json.md, "calibrate"): per run, the effects adopted in order,
+the final model's sizes ± standard errors, the NEES and log-likelihood on the training runs, the
+NEES on the held-out runs (pooled, per kind of path, experiments consistent, experiments outside the training
+domain), the candidates the cross-validation stopped, and the verdict. Every figure is
+calibrate's; this script only lays them side by side.
 
-Usage: loop_summary.py NAME=LOOP.json [NAME=LOOP.json ...] > summary.md
+Usage: loop_summary.py NAME=CALIBRATE_DIR_OR_JSON [NAME=... ...] > summary.md
 """
 import json
+import os
 import sys
 
-from diagnose_loop import plus_minus
+
+def plus_minus(value, stderr, digits=5):
+    """value ± its standard error, or "(no standard error)" when the fit has none."""
+    return f"{value:.{digits}g} ± " + (f"{stderr:.2g}" if stderr is not None else "(no standard error)")
 
 
-def model(report):
-    """The final model's compare summary: the joint fit's, else the loop's."""
-    return report.get("compare_fit") or report["compare_after"]
-
-
-def held_model(report):
-    held = report.get("holdout")
-    return (held.get("compare_fit") or held.get("compare_after")) if held else None
+def load(path):
+    if os.path.isdir(path):
+        path = os.path.join(path, "calibrate.json")
+    with open(path) as f:
+        return json.load(f)
 
 
 def sizes(report):
-    fit = report.get("fit")
-    identified = fit and any(se is not None for se in fit["stderr"].values())
-    if not identified:  # no joint fit, or one the data cannot pin down: as diagnose sized each
-        if not any(s["named"] for s in report["rounds"]):
-            return "nothing"
-        why = "no joint fit" if not fit else "the joint fit is not identified (" + \
-            "; ".join(fit.get("warnings", [])) + ")"
-        return "; ".join(", ".join(f"{s['named']}.{k} = {plus_minus(v, s['stderr'][k], 5)}"
-                                   for k, v in s["parameters"].items())
-                         for s in report["rounds"] if s["named"]) + f" ({why}: as diagnose named them)"
-    return ", ".join(f"{k} = {plus_minus(v, fit['stderr'][k], 5)}" for k, v in fit["parameters"].items())
+    """The final model's fitted parameters: the joint fit's when calibrate took it, else the
+    last adopting round's (as diagnose sized them)."""
+    model = report["model"]
+    fit = report.get("joint_fit")
+    if fit and model.get("joint_fit_adopted"):
+        return ", ".join(f"{k} = {plus_minus(v, fit['stderr'].get(k))}" for k, v in fit["parameters"].items())
+    adopted = [d["best"]["effect"] for d in report["rounds"] if d.get("best")]
+    if not adopted:
+        return "nothing fitted"
+    return f"the loop's model ({model.get('joint_fit_note', 'no joint fit')})"
 
 
-def cells(summary, types, field):
+def held_out_cells(held, kinds):
+    if not held:
+        return [""] * (len(kinds) + 3)
+    by_kind = [f"{held['by_kind'][k]:.2f}" if k in held["by_kind"] else "" for k in kinds]
+    # holdout.extrapolation has one entry per experiment and feature, "name: feature ...".
+    outside = len({x.split(": ", 1)[0] for x in held["extrapolation"]})
+    return by_kind + [f"**{held['nees_mean']:.2f}**",
+                      f"{held['consistent_experiments']} of {held['experiments']}", str(outside)]
+
+
+def stopped(report):
+    """Significant candidates the guards stopped, with the rule (mimics first)."""
     out = []
-    for t in types:
-        v = summary["by_type"].get(t) if summary else None
-        if v is None:
-            out.append("")
-        elif field == "nees":
-            out.append(f"{v['nees']:.2f}")
-        else:
-            signed = v.get("heading_z_signed_mean")
-            out.append(("" if signed is None else f"{signed:+.1f} ") + f"({v['heading_z_rms']:.1f})")
+    for c in report["candidates_cv"]:
+        if c["verdict"] in ("mimic", "stopped"):
+            gain = "" if c["gain_held_out"] is None else f", held out {c['gain_held_out']:+.1f}"
+            entry = f"{c['effect']} (round {c['round']}: {c['rule']}{gain})"
+            if entry not in out:
+                out.append(entry)
     return out
 
 
@@ -53,34 +64,35 @@ def main():
     runs = []
     for arg in sys.argv[1:]:
         name, _, path = arg.partition("=")
-        with open(path) as f:
-            runs.append((name, json.load(f)))
-    types = sorted({t for _, r in runs for c in (model(r), held_model(r)) if c for t in c["by_type"]})
-    print("## Effects named (joint fit of everything named, full likelihood, ± standard error)\n")
-    print("| split | named, in order | sizes |")
+        runs.append((name, load(path)))
+    kinds = sorted({k for _, r in runs if r.get("holdout") for k in r["holdout"]["by_kind"]})
+    print("## Effects adopted (in order) and the final model's sizes (± standard error)\n")
+    print("| split | adopted, in order | sizes |")
     print("|---|---|---|")
     for name, r in runs:
-        named = " → ".join(s["named"] for s in r["rounds"] if s["named"]) or "nothing"
-        print(f"| {name} | {named} | {sizes(r)} |")
-    for title, field in (("NEES per run by path type, final model (3 is right)", "nees"),
-                         ("Heading-mean misfit by path type, final model, in standard errors: "
-                          "mean signed by the turn sense (RMS)", "heading")):
-        print(f"\n## {title}\n")
-        print("| split | runs | " + " | ".join(types) + (" | pooled | experiments consistent |"
-                                                         if field == "nees" else " |"))
-        print("|---|---|" + "---|" * (len(types) + (2 if field == "nees" else 0)))
-        for name, r in runs:
-            for label, c in (("in-sample", model(r)), ("held-out", held_model(r))):
-                if not c:
-                    continue
-                extra = (f" | {c['nees_mean']:.2f} | {c['consistent_experiments']} of "
-                         f"{c['experiments']}" if field == "nees" else "")
-                print(f"| {name} | {label} | " + " | ".join(cells(c, types, field)) + extra + " |")
-    print("\n## Verdict of the last diagnose round (in-sample)\n")
+        print(f"| {name} | {', '.join(r['named']) or 'nothing'} | {sizes(r)} |")
+    held = any(r.get("holdout") for _, r in runs)
+    columns = ["split", "training runs", "training verdict", "training log-likelihood"] + (
+        [f"held out: {k}" for k in kinds]
+        + ["held out, pooled", "held-out experiments consistent", "held-out experiments outside the domain"]
+        if held else [])
+    print("\n## NEES per run (3 is right)\n")
+    print("| " + " | ".join(columns) + " |")
+    print("|" + "---|" * len(columns))
     for name, r in runs:
-        top = [f"{x['feature']}{', ' + x['part'] if x.get('part') else ''} (p = {x['p_value']:.2g})" for x in r.get("residuals") or []
-               if x.get("p_value") is not None and x["p_value"] < r.get("alpha", 0.01)][:3]
-        verdict = "explained" if r.get("explained") else "not explained"
+        after = r["after"]
+        cells = [name, f"{after['nees_mean']:.2f}", after["verdict"], f"{after['log_likelihood']:.1f}"]
+        cells += held_out_cells(r.get("holdout"), kinds) if held else []
+        print("| " + " | ".join(cells) + " |")
+    print("\n## Significant candidates the guards stopped (docs/calibrate.md, \"Guards\")\n")
+    for name, r in runs:
+        print(f"- {name}: " + ("; ".join(stopped(r)) or "none"))
+    print("\n## Verdict on the training runs\n")
+    for name, r in runs:
+        top = [f"{x['feature']}{', ' + x['part'] if x.get('part') else ''} (p = {x['p_value']:.2g})"
+               for x in r.get("residuals") or []
+               if x.get("p_value") is not None and x["p_value"] < r["alpha"]][:3]
+        verdict = "explained" if r["explained"] else "not explained"
         print(f"- {name}: {verdict}" + (f"; the misfit lines up with {', '.join(top)}" if top else ""))
     return 0
 

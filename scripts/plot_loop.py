@@ -1,18 +1,20 @@
 #!/usr/bin/python3
-"""Watch the error fall: one row per round of a scripts/diagnose_loop.py run.
+"""Watch the error fall: the rounds of an `odomcov calibrate` run, from its --out directory.
 
-Each row sets the model before the round against the model after it (the effect named that
-round added). Its first panel is the mean NEES per path type, before and after (3 is right).
-Then, for each path type, the x-y end-point errors of its runs with every experiment's
-predicted 95% ellipse before (dashed) and after (solid), on the same axes.
+Plots only what calibrate.json already holds (docs/json.md, "calibrate"):
+  * the NEES mean per run of the training runs, per round (round 0 is the suite's own model,
+    each later point the model after that round's adoption, the last the final model: the joint
+    fit when calibrate took it); with a hold-out (--holdout or --train), the final model's NEES
+    on the held-out runs, pooled and per kind of path (holdout.by_kind). 3 is right;
+  * the corrected odometry's mean end-position error before and after, per kind of experiment
+    (odometry_correction.by_kind), when the model corrects the odometry;
+  * with a hold-out, each held-out kind's x-y end-point errors with the final model's predicted
+    95% ellipse per experiment (holdout.compare).
 
-The path type is the experiment name's prefix before the first '-' (square-..., circular-...),
-or the first group of --group-by REGEX.
+The kind of a held-out experiment is the first group of --group-by (default: the name's prefix
+before the first '-', as calibrate's default kind).
 
-With --holdout (a loop run with --holdout or --train), a last row sets the held-out runs with
-the suite's model against the joint fit learnt on the other runs.
-
-Usage: plot_loop.py LOOP_DIR [--group-by REGEX] [--types N] [--holdout] --out FIG.png
+Usage: plot_loop.py CALIBRATE_DIR [--group-by REGEX] [--types N] --out FIG.png
 """
 import argparse
 import json
@@ -27,8 +29,9 @@ try:
     import matplotlib.pyplot as plt
     from matplotlib.patches import Ellipse
 except ImportError:
-    sys.exit("plot_loop.py needs matplotlib: apt-get install python3-matplotlib, "
-             "and run it with /usr/bin/python3")
+    print("plot_loop.py: needs matplotlib; install Debian's python3-matplotlib (scripts/setup.sh does) "
+          "and run it with /usr/bin/python3", file=sys.stderr)
+    sys.exit(2)
 
 CHI2_2_95 = 5.991464547107979  # chi^2_2 95% point
 
@@ -47,99 +50,93 @@ def kind_of(name, pattern):
     return (m.group(1) if m and m.groups() else m.group(0)) if m else name
 
 
-def nees_by_kind(compare, pattern):
-    sums = {}
-    for e in compare["experiments"]:
-        k = kind_of(e["name"], pattern)
-        s = sums.setdefault(k, [0.0, 0])
-        s[0] += e["nees_mean"] * e["n"]
-        s[1] += e["n"]
-    return {k: v[0] / v[1] for k, v in sums.items()}
+def rounds_nees(report):
+    """(label, NEES mean) per step: the suite's model, each adoption, the final model."""
+    rounds = report["rounds"]
+    steps = [("start", rounds[0]["before"]["nees_mean"])] if rounds else []
+    for r, d in enumerate(rounds, 1):
+        if d.get("best"):
+            steps.append((f"{r}: + {d['best']['effect']}", d["after"]["nees_mean"]))
+    final = "joint fit" if report["model"].get("joint_fit_adopted") else "final (loop's model)"
+    steps.append((final, report["after"]["nees_mean"]))
+    return steps
 
 
-def draw_row(axes, before, after, label, kinds, pattern):
-    """One row: the NEES by path type before and after, then each path type's x-y errors with
-    the predicted 95% ellipses before (dashed) and after (solid)."""
-    ax = axes[0]
-    nb, na = nees_by_kind(before, pattern), nees_by_kind(after, pattern)
-    xs = range(len(nb))
-    ax.bar([x - 0.2 for x in xs], list(nb.values()), 0.4, label="before", color="0.7")
-    ax.bar([x + 0.2 for x in xs], [na.get(k, float("nan")) for k in nb], 0.4, label="after",
-           color="tab:blue")
+def draw_rounds(ax, report):
+    steps = rounds_nees(report)
+    xs = range(len(steps))
+    ax.plot(xs, [v for _, v in steps], "o-", color="tab:blue", label="training runs")
+    held = report.get("holdout")
+    if held:
+        last = len(steps) - 1
+        ax.plot([last], [held["nees_mean"]], "s", color="tab:red", ms=8, label="held out, pooled")
+        for i, (kind, value) in enumerate(held["by_kind"].items()):
+            ax.plot([last + 0.15 * (i + 1)], [value], "_", color="tab:red", ms=10, mew=2)
+            ax.annotate(kind, (last + 0.15 * (i + 1), value), fontsize=6, xytext=(3, 0),
+                        textcoords="offset points", va="center")
     ax.axhline(3, color="k", lw=0.8, ls=":")
     ax.set_xticks(list(xs))
-    ax.set_xticklabels(list(nb), rotation=30, fontsize=7)
+    ax.set_xticklabels([label for label, _ in steps], rotation=35, ha="right", fontsize=6)
     ax.set_yscale("log")
-    ax.set_title(f"{label}\nNEES mean by path type", fontsize=8)
-    ax.legend(fontsize=7)
-    by_name = {e["name"]: e for e in after["experiments"]}
-    for ax, k in zip(axes[1:], kinds):
-        drawn = 0
-        for e in before["experiments"]:
-            if kind_of(e["name"], pattern) != k or e["name"] not in by_name:
+    ax.set_ylabel("NEES mean per run (3 is right)", fontsize=7)
+    ax.set_title(f"{report['suite']}: NEES per round", fontsize=8)
+    ax.legend(fontsize=6)
+
+
+def draw_correction(ax, report):
+    correction = report.get("odometry_correction")
+    if not correction:
+        ax.axis("off")
+        return
+    kinds = correction["by_kind"]
+    xs = range(len(kinds))
+    ax.bar([x - 0.2 for x in xs], [1e3 * k["mean_xy_before"] for k in kinds], 0.4,
+           label="nominal odometry", color="0.7")
+    ax.bar([x + 0.2 for x in xs], [1e3 * k["mean_xy_after"] for k in kinds], 0.4,
+           label="corrected", color="tab:blue")
+    ax.set_xticks(list(xs))
+    ax.set_xticklabels([k["kind"] for k in kinds], rotation=30, fontsize=7)
+    ax.set_ylabel("mean |xy| end error [mm]", fontsize=7)
+    ax.set_title("corrected odometry (training runs)", fontsize=8)
+    ax.legend(fontsize=6)
+
+
+def draw_held_out(axes, compare, kinds, pattern):
+    for ax, k in zip(axes, kinds):
+        for e in compare["experiments"]:
+            if kind_of(e["name"], pattern) != k:
                 continue
-            drawn += 1
-            a = by_name[e["name"]]
-            ax.plot([p[0] for p in a["errors"]], [p[1] for p in a["errors"]], ".", ms=3, color="k")
-            ellipse(ax, e["predicted"]["mean"], e["predicted"]["cov"], color="0.5", ls="--", lw=0.8)
-            ellipse(ax, a["predicted"]["mean"], a["predicted"]["cov"], color="tab:blue", lw=0.9)
-        if not drawn:  # a path type of the other side of a hold-out
-            ax.axis("off")
-            continue
+            ax.plot([p[0] for p in e["errors"]], [p[1] for p in e["errors"]], ".", ms=3, color="k")
+            ellipse(ax, e["predicted"]["mean"], e["predicted"]["cov"], color="tab:red", lw=0.9)
         ax.autoscale_view()
         ax.set_aspect("equal", adjustable="datalim")
-        ax.set_title(f"{k}: x-y error [m], 95% before (dashed) / after", fontsize=8)
+        ax.set_title(f"held out, {k}: x-y error [m], final model's 95%", fontsize=8)
         ax.tick_params(labelsize=6)
-    for ax in axes[1 + len(kinds):]:
-        ax.axis("off")
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("loop", help="the --out directory of scripts/diagnose_loop.py")
+    parser.add_argument("calibrate", help="the --out directory of odomcov calibrate")
     parser.add_argument("--group-by", default=r"^([^-]+)",
-                        help="regex whose first group is the path type (default: the name's "
-                             "prefix before the first '-')")
-    parser.add_argument("--types", type=int, default=4, help="at most this many path types drawn")
-    parser.add_argument("--holdout", action="store_true",
-                        help="add a last row: the held-out runs with the suite's model against "
-                             "the joint fit (or the loop's model) learnt on the others")
+                        help="regex whose first group is a held-out experiment's kind (default: "
+                             "the name's prefix before the first '-')")
+    parser.add_argument("--types", type=int, default=4, help="at most this many held-out kinds drawn")
     parser.add_argument("--out", required=True, help="output image (PNG)")
     args = parser.parse_args()
-    with open(os.path.join(args.loop, "loop.json")) as f:
+    with open(os.path.join(args.calibrate, "calibrate.json")) as f:
         report = json.load(f)
-    files = report.get("compare_rounds") or []
-    if len(files) < 2:
-        files = [os.path.join(args.loop, "compare-before.json"),
-                 os.path.join(args.loop, "compare-after.json")]
-    compares = []
-    for path in files:
-        with open(path) as f:
-            compares.append(json.load(f))
-    named = [s["named"] for s in report["rounds"] if s.get("named")]
-    pairs = [(compares[r], compares[r + 1],
-              f"round {r + 1}: + {named[r] if r < len(named) else 'nothing named'}")
-             for r in range(len(compares) - 1)]
     held = report.get("holdout")
-    if args.holdout and held:
-        after = "compare_fit" if "compare_fit" in held else "compare_after"
-        with open(os.path.join(args.loop, "holdout-before.json")) as f:
-            first = json.load(f)
-        with open(os.path.join(args.loop, f"holdout-{after}.json")) as f:
-            last = json.load(f)
-        pairs.append((first, last, "held-out runs: the suite's model → "
-                      + ("the joint fit" if after == "compare_fit" else "the loop's model")))
     kinds = []
-    for before, _, _ in pairs:
-        for e in before["experiments"]:
-            k = kind_of(e["name"], args.group_by)
-            if k not in kinds:
-                kinds.append(k)
+    for e in held["compare"]["experiments"] if held else []:
+        k = kind_of(e["name"], args.group_by)
+        if k not in kinds:
+            kinds.append(k)
     kinds = kinds[:args.types]
-    fig, axes = plt.subplots(len(pairs), 1 + len(kinds),
-                             figsize=(3.6 * (1 + len(kinds)), 3.4 * len(pairs)), squeeze=False)
-    for row, (before, after, label) in zip(axes, pairs):
-        draw_row(row, before, after, label, kinds, args.group_by)
+    fig, axes = plt.subplots(1, 2 + len(kinds), figsize=(4.2 * (2 + len(kinds)), 4.0), squeeze=False)
+    draw_rounds(axes[0][0], report)
+    draw_correction(axes[0][1], report)
+    if held:
+        draw_held_out(axes[0][2:], held["compare"], kinds, args.group_by)
     fig.tight_layout()
     fig.savefig(args.out, dpi=110)
     return 0

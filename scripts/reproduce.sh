@@ -98,58 +98,65 @@ if want optiodom; then
   done
   # Where each path type turns (spin fraction) and how fast it drives, per campaign.
   save "$out/features.md" "$python" scripts/optiodom_features.py "$suite"
-  # The loop of issues 7 and 10: diagnose, adopt the effect it names, repeat; then compare and
-  # fit; every NEES also per path type. In-sample on all the runs, then three hold-outs, each
-  # learnt on some runs of the one imported suite and judged on the others: by path type (train
-  # on the squares and Ivanjko paths, test on the circles and free paths), and by campaign
-  # (December 2020 -> June 2020, and the reverse; the January 2021 free paths are in neither).
-  # group: is the session, so group_variation is among diagnose's candidates in every loop. Order
-  # 2 (the fast path makes it affordable). Each split runs twice: with the catalogue (the study's
-  # models), and as NAME_custom with the custom hypotheses of candidates.yaml ranked beside it
-  # (written from the residual alignment: speed, spin fraction, turn direction); ablation.md
-  # then asks whether what the custom loops named helps on the held-out runs.
-  loop() {  # NAME [diagnose_loop.py options]
-    local name=$1 dir="$suite-loop-$1" holdout=() custom=()
-    shift
-    [[ $# -gt 0 ]] && holdout=(--holdout)
-    [[ $name == *_custom ]] && custom=(--candidates "$out/candidates.yaml")
-    rm -rf "$dir"
-    save "$out/loop_$name.md" "$python" scripts/diagnose_loop.py --odomcov "$odomcov" \
-      "$suite/suite.yaml" --out "$dir" --order 2 --rounds 12 "${custom[@]}" "$@"
-    cp "$dir/loop.json" "$out/loop_$name.json"
-    [[ $name == *_custom ]] || "$python" scripts/plot_loop.py "$dir" "${holdout[@]}" --out "$out/loop_$name.png"
+  # calibrate (docs/calibrate.md): diagnose, adopt the candidate that predicts its held-out folds
+  # better, repeat, fit jointly; with --train/--test the final model is judged on the held-out
+  # runs. In-sample on all the runs; each path type held out in turn; the campaigns (December
+  # 2020 -> June 2020 and the reverse; the January 2021 free paths are in neither). group: is the
+  # session, so group_variation is among the candidates. Order 2, alpha 0.01, seed 1 (defaults).
+  splits=(
+    "all"
+    "hold_circular --train ^(free|ivanjko|square)- --test ^circular-"
+    "hold_free --train ^(circular|ivanjko|square)- --test ^free-"
+    "hold_ivanjko --train ^(circular|free|square)- --test ^ivanjko-"
+    "hold_square --train ^(circular|free|ivanjko)- --test ^square-"
+    "dec_to_jun --train ^[a-z]+-2312 --test ^[a-z]+-(2306|2506)"
+    "jun_to_dec --train ^[a-z]+-(2306|2506) --test ^[a-z]+-2312"
+  )
+  # calib NAME SUITE_DIR [calibrate options]: the report calibrate_NAME.txt; for the study's own
+  # splits (not the _custom and _day variants, whose figures custom.md and group.md tabulate)
+  # also calibrate_NAME.json and the plot calibrate_NAME.png.
+  calib() {
+    local name=$1 from=$2 dir="$suite-calibrate-$1"
+    shift 2
+    save "$out/calibrate_$name.txt" "$odomcov" calibrate "$from/suite.yaml" --out "$dir" "$@"
+    [[ $name == *_custom || $name == *_day ]] && return
+    cp "$dir/calibrate.json" "$out/calibrate_$name.json"
+    "$python" scripts/plot_loop.py "$dir" --out "$out/calibrate_$name.png"
   }
-  for variant in "" _custom; do
-    loop "all$variant"
-    loop "paths$variant" --train '^(square|ivanjko)-' --test '^(circular|free)-'
-    loop "dec_to_jun$variant" --train '^[a-z]+-2312' --test '^[a-z]+-(2306|2506)'
-    loop "jun_to_dec$variant" --train '^[a-z]+-(2306|2506)' --test '^[a-z]+-2312'
-  done
-  # The robot and model the loop built, to paste into a suite.
-  save "$out/model_all.yaml" sed -n '/^robot:/p; /^model:/,/^experiments:/{/^experiments:/!p}' \
-    "$suite-loop-all/suite.yaml"
-  # Each hold-out's joint fit without the custom effects its loop named, refitted: do they help on
-  # the runs the loop never saw? (issue 10: keep a hypothesis only if it does.)
-  save "$out/ablation.md" "$python" scripts/optiodom_ablation.py --odomcov "$odomcov" \
-    --out "$suite-ablation" "paths:$suite-loop-paths_custom" "dec_to_jun:$suite-loop-dec_to_jun_custom" \
-    "jun_to_dec:$suite-loop-jun_to_dec_custom"
-  cp "$suite-ablation/ablation.json" "$out/ablation.json"
-  # Groups by session against groups by day (import --group day), on the in-sample and path-type
-  # models; and June -> December with a session group_variation of the spin wheelbase learnt in
-  # June (its loop ends consistent without one), so December is predicted with the between-session
-  # spread.
+  # The same recordings grouped by recording day instead of by session (below).
   import_sessions "$suite-day" --group day "$data"/square/* "$data"/ivanjko/* "$data"/circular/* \
     "$data"/free/* > /dev/null
-  save "$out/group.md" "$python" scripts/optiodom_group.py --odomcov "$odomcov" --out "$suite-group" \
-    "all-session:$suite/suite.yaml:$suite-loop-all:turn_dependent_wheelbase.Eb_spin:." \
-    "all-day:$suite-day/suite.yaml:$suite-loop-all:turn_dependent_wheelbase.Eb_spin:." \
-    "paths-session:$suite/suite.yaml:$suite-loop-paths:wheelbase_error.Eb:^(square|ivanjko)-:^(circular|free)-" \
-    "paths-day:$suite-day/suite.yaml:$suite-loop-paths:wheelbase_error.Eb:^(square|ivanjko)-:^(circular|free)-" \
-    "jun_to_dec-session:$suite/suite.yaml:$suite-loop-jun_to_dec:turn_dependent_wheelbase.Eb_spin:^[a-z]+-(2306|2506):^[a-z]+-2312"
-  cp "$suite-group/group.json" "$out/group.json"
-  # One table across the four: effects and sizes, NEES and heading bias per path type.
-  save "$out/summary.md" "$python" scripts/loop_summary.py "all=$out/loop_all.json" \
-    "paths=$out/loop_paths.json" "dec_to_jun=$out/loop_dec_to_jun.json" \
-    "jun_to_dec=$out/loop_jun_to_dec.json"
+  set -f  # the regexes are arguments, never globs
+  for split in "${splits[@]}"; do
+    read -r -a args <<<"$split"
+    calib "${args[0]}" "$suite" "${args[@]:1}"
+  done
+  # The robot and model calibrate built on all the runs, to paste into a suite, and its ROS 2
+  # parameters.
+  cp "$suite-calibrate-all/model.yaml" "$out/model_all.yaml"
+  cp "$suite-calibrate-all/diff_drive.yaml" "$out/diff_drive_all.yaml"
+  # The custom hypotheses of candidates.yaml (written from the residual alignment: speed, spin
+  # fraction, turn direction) ranked beside the catalogue: calibrate adopts one only when it
+  # predicts its held-out folds better, and each split's hold-out says whether the model then
+  # predicts the held-out runs better.
+  for split in "${splits[@]}"; do
+    read -r -a args <<<"$split"
+    calib "${args[0]}_custom" "$suite" "${args[@]:1}" --candidates "$out/candidates.yaml"
+  done
+  # Groups by recording day (import --group day, above) instead of by session, on all the runs.
+  calib all_day "$suite-day"
+  set +f
+  # Tables across the runs: the catalogue splits; each with and without the custom hypotheses;
+  # session against day groups. Every figure is calibrate's.
+  names=() custom=()
+  for split in "${splits[@]}"; do
+    n=${split%% *}
+    names+=("$n=$out/calibrate_$n.json")
+    custom+=("$n=$out/calibrate_$n.json" "${n}_custom=$suite-calibrate-${n}_custom")
+  done
+  save "$out/summary.md" "$python" scripts/loop_summary.py "${names[@]}"
+  save "$out/custom.md" "$python" scripts/loop_summary.py "${custom[@]}"
+  save "$out/group.md" "$python" scripts/loop_summary.py "all (session groups)=$out/calibrate_all.json" \
+    "all (day groups)=$suite-calibrate-all_day"
 fi
 echo "results regenerated in $results" >&2

@@ -10,8 +10,9 @@
 #include <regex>
 #include <sstream>
 
-#include "commands.hpp"
+#include "calibrate_command.hpp"
 #include "calibrate_output.hpp"
+#include "commands.hpp"
 #include "odomcov/base/format.hpp"
 #include "odomcov/io/suite_io.hpp"
 #include "odomcov/measurement/calibrate.hpp"
@@ -24,16 +25,6 @@ namespace {
 
 /// --rounds: at least one; more than 100 effects is not a model anyone can read.
 constexpr int kMaxRounds = 100;
-
-struct CalibrateCliOptions {
-  std::string suite, out, candidates, holdout, train, test, json;
-  int rounds = kCalibrateRounds;
-  double alpha = kDiagnoseAlpha;
-  int order = 2;
-  int threads = 0;
-  bool exact = false;
-  RefereeOptions referee;
-};
 
 /// Set by SIGINT: the library stops between two fits and nothing is written.
 DiagnoseProgress* g_progress = nullptr;
@@ -73,13 +64,8 @@ Suite select(const Suite& suite, const std::regex& pattern, bool keep) {
 }
 
 /// The training suite and the held-out one (none without --holdout or --train).
-struct Inputs {
-  Suite train;
-  std::optional<Suite> held;
-};
-
-Inputs load_inputs(const CalibrateCliOptions& opt) {
-  Inputs in{load_suite(opt.suite), std::nullopt};
+CalibrateInputs load_inputs(const CalibrateCliOptions& opt) {
+  CalibrateInputs in{load_suite(opt.suite), std::nullopt, {}, {}};
   if (!opt.holdout.empty()) in.held = load_suite(opt.holdout);
   if (opt.train.empty()) return in;
   const Suite all = in.train;
@@ -197,20 +183,7 @@ void write_outputs(const CalibrateCliOptions& opt, const Suite& suite, const Cal
 }
 
 int run_calibrate(const CalibrateCliOptions& opt) {
-  check_options(opt);
-  const Inputs in = load_inputs(opt);
-  CalibrateOptions options;
-  options.rounds = opt.rounds;
-  options.diagnose.alpha = opt.alpha;
-  options.diagnose.path = opt.exact ? FitPath::exact : FitPath::fast;
-  options.diagnose.calibration = calibration_options(opt.referee, nullptr);
-  options.diagnose.candidates = load_candidates(opt.candidates, in.train);
-  for (const Suite* s : {&in.train, in.held ? &*in.held : nullptr}) {
-    if (s) check_second_order_size(*s, opt.order);
-  }
-  SuiteModel start = suite_model(in.train);
-  start.order = opt.order;
-  check_finite_start(in.train, start, "calibration");
+  const CalibrateInputs in = prepare_calibrate(opt);
   std::optional<tbb::global_control> threads;
   if (opt.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(opt.threads));
   DiagnoseProgress progress;
@@ -221,7 +194,7 @@ int run_calibrate(const CalibrateCliOptions& opt) {
                   [&progress] { return "fits, round " + std::to_string(progress.round.load()); });
   std::optional<CalibrateResult> c;
   try {
-    c = calibrate(in.train, start, options, in.held ? &*in.held : nullptr, &progress);
+    c = calibrate(in.train, in.start, in.options, in.held ? &*in.held : nullptr, &progress);
   } catch (const Cancelled&) {
     bar.finish();
     std::signal(SIGINT, previous);
@@ -229,7 +202,7 @@ int run_calibrate(const CalibrateCliOptions& opt) {
     return 130;
   }
   bar.finish();
-  write_outputs(opt, in.train, *c, calibrate_json(in.train, start, *c, opt.alpha,
+  write_outputs(opt, in.train, *c, calibrate_json(in.train, in.start, *c, opt.alpha,
                                      c->holdout ? comparison_json(*in.held, c->holdout->comparison) : json(nullptr)));
   std::signal(SIGINT, previous);
   std::cout << report(in.train, *c, opt.alpha) << "\nWrote " << opt.out << "/model.yaml, calibrate.json and diff_drive.yaml\n";
@@ -238,25 +211,46 @@ int run_calibrate(const CalibrateCliOptions& opt) {
 
 }  // namespace
 
+CLI::App* add_calibrate_options(CLI::App& app, CalibrateCliOptions& opt) {
+  CLI::App* cmd = app.add_subcommand("calibrate", "The whole loop: diagnose, adopt what predicts held-out runs, repeat, joint fit");
+  cmd->add_option("suite", opt.suite, "Measurement suite (YAML)")->required();
+  cmd->add_option("--out", opt.out, "Directory for model.yaml, calibrate.json and diff_drive.yaml")->required();
+  cmd->add_option("--candidates", opt.candidates,
+                  "YAML list of your own candidate effects (custom, or catalogue ones with starting values)");
+  cmd->add_option("--holdout", opt.holdout, "Another suite of runs to judge the final model on");
+  cmd->add_option("--train", opt.train, "Calibrate on the experiments whose names match this regular expression");
+  cmd->add_option("--test", opt.test, "With --train: judge on the experiments matching this (default: the others)");
+  cmd->add_option("--rounds", opt.rounds, "At most this many rounds")->capture_default_str();
+  cmd->add_option("--alpha", opt.alpha, "Family-wise significance level over each round's candidates")->capture_default_str();
+  cmd->add_option("--order", opt.order, "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
+      ->capture_default_str();
+  cmd->add_option("--threads", opt.threads, "Worker threads; 0 = all cores")->capture_default_str();
+  add_referee_options(cmd, opt.referee);
+  cmd->add_option("--json", opt.json, "Also write calibrate.json to this file");
+  cmd->add_flag("--exact", opt.exact, "Every fit on the exact path (slow; the reference)");
+  return cmd;
+}
+
+CalibrateInputs prepare_calibrate(const CalibrateCliOptions& opt) {
+  check_options(opt);
+  CalibrateInputs in = load_inputs(opt);
+  in.options.rounds = opt.rounds;
+  in.options.diagnose.alpha = opt.alpha;
+  in.options.diagnose.path = opt.exact ? FitPath::exact : FitPath::fast;
+  in.options.diagnose.calibration = calibration_options(opt.referee, nullptr);
+  in.options.diagnose.candidates = load_candidates(opt.candidates, in.train);
+  for (const Suite* s : {&in.train, in.held ? &*in.held : nullptr}) {
+    if (s) check_second_order_size(*s, opt.order);
+  }
+  in.start = suite_model(in.train);
+  in.start.order = opt.order;
+  check_finite_start(in.train, in.start, "calibration");
+  return in;
+}
+
 void setup_calibrate(CLI::App& app, int& exit_code) {
   auto opt = std::make_shared<CalibrateCliOptions>();
-  CLI::App* cmd = app.add_subcommand("calibrate", "The whole loop: diagnose, adopt what predicts held-out runs, repeat, joint fit");
-  cmd->add_option("suite", opt->suite, "Measurement suite (YAML)")->required();
-  cmd->add_option("--out", opt->out, "Directory for model.yaml, calibrate.json and diff_drive.yaml")->required();
-  cmd->add_option("--candidates", opt->candidates,
-                  "YAML list of your own candidate effects (custom, or catalogue ones with starting values)");
-  cmd->add_option("--holdout", opt->holdout, "Another suite of runs to judge the final model on");
-  cmd->add_option("--train", opt->train, "Calibrate on the experiments whose names match this regular expression");
-  cmd->add_option("--test", opt->test, "With --train: judge on the experiments matching this (default: the others)");
-  cmd->add_option("--rounds", opt->rounds, "At most this many rounds")->capture_default_str();
-  cmd->add_option("--alpha", opt->alpha, "Family-wise significance level over each round's candidates")->capture_default_str();
-  cmd->add_option("--order", opt->order, "Model order: 2 (default) = exact Gaussian-heading moments, 1 = first order")
-      ->capture_default_str();
-  cmd->add_option("--threads", opt->threads, "Worker threads; 0 = all cores")->capture_default_str();
-  add_referee_options(cmd, opt->referee);
-  cmd->add_option("--json", opt->json, "Also write calibrate.json to this file");
-  cmd->add_flag("--exact", opt->exact, "Every fit on the exact path (slow; the reference)");
-  cmd->callback([opt, &exit_code] { exit_code = run_calibrate(*opt); });
+  add_calibrate_options(app, *opt)->callback([opt, &exit_code] { exit_code = run_calibrate(*opt); });
 }
 
 }  // namespace odomcov::cli

@@ -46,6 +46,21 @@ if [ "$mode" = cases ]; then
   done <"$here/cases.txt"
 else
   after=()
+  # fuzz_calibrate's arguments (one per line) for the CLI: the files they name in DIR, --out and
+  # --json under OUT (the fuzzer ignores both). Prints them one per line.
+  calibrate_args() {  # ARGS_FILE DIR OUT
+    local -a a
+    mapfile -t a <"$1"
+    local i
+    for ((i = 0; i < ${#a[@]}; i++)); do
+      case ${a[i]} in
+        --out) echo --out; echo "$3"; i=$((i + 1)) ;;
+        --json) echo --json; echo "$3.json"; i=$((i + 1)) ;;
+        -*) echo "${a[i]}" ;;
+        *) if [ -n "${a[i]}" ] && [ -e "$2/$(basename -- "${a[i]}")" ]; then echo "$2/$(basename -- "${a[i]}")"; else echo "${a[i]}"; fi ;;
+      esac
+    done
+  }
   # Fuzz corpus inputs: unpack the sections (tests/fuzz/fuzz_util.hpp) and run the command that
   # reads that kind of file.
   for input in "$src"/tests/fuzz/corpus/*/*; do
@@ -54,7 +69,7 @@ else
     case $target in
       path_config) main=config.yaml ;; sweep) main=sweep.yaml ;; world|roundtrip) main=world.yaml ;;
       suite) main=suite.yaml ;; custom) main=effects.yaml ;; optiodom) main=notes.txt; dir="$dir/square/20000101"; mkdir -p "$dir" ;;
-      csv_import) main=run-01.csv ;;
+      csv_import) main=run-01.csv ;; calibrate) main=args ;;
     esac
     awk -v dir="$dir" -v main="$main" '
       BEGIN { f = dir "/" main }
@@ -70,6 +85,8 @@ else
       custom) check "$name" "0 2" diagnose "$src/tests/data/suites/good_logs.yaml" --effects wheelbase_error \
                 --candidates "$dir/$main" --json "$work/out.$name" ;;
       csv_import) check "$name" "0 2" import csv "$dir" --wheelbase 0.3 --out "$work/out.$name" ;;
+      calibrate) mapfile -t cargs < <(calibrate_args "$dir/$main" "$dir" "$work/out.$name")
+                 check "$name" "0 2" calibrate "${cargs[@]}" ;;
     esac
   done
 fi
