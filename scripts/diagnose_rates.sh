@@ -11,9 +11,13 @@
 # 20261124, 24112026 and 26112024 (and the ctest seed 7), so the batches were then rerun with
 # new seeds. Under `odomcov calibrate` (issue 23: selection by held-out prediction, developed on
 # the ctest seed 7 and the batches 4242, 4243 and 2311) they were rerun with new seeds again:
-# mixed 20261201, none 1122026, group 20261202.
-#   scripts/diagnose_rates.sh            # the three batches
-#   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, or pilot (16 worlds)
+# mixed 20261201, none 1122026, group 20261202. With the nested rule (diagnose and after the
+# rounds) and the referee's alpha spending over its looks, rerun with new seeds again: mixed
+# 27112026, none 1012027, group 2012027; and 28 worlds of physics in no catalogue (open,
+# 28112026). (The nested rule came from world 96 of seed 20261201; its check after the rounds
+# from worlds 15 and 73 of seed 31122026, which is not reported.)
+#   scripts/diagnose_rates.sh            # the four batches
+#   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, or pilot (16 worlds)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
@@ -21,7 +25,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="$root/results/diagnose"
 work="$root/build/diagnose_rates"
 mkdir -p "$out" "$work"
-parts=("${@:-mixed none group}")
+parts=("${@:-mixed none group open}")
 want() { [[ " ${parts[*]} " == *" $1 "* ]]; }
 run() {  # name seed worlds cases
   rm -rf "${work:?}/$1"
@@ -30,8 +34,9 @@ run() {  # name seed worlds cases
     --seed "$2" --worlds "$3" --cases "$4" --out "$work/$1" --report "$out/$1.json" > "$out/$1.txt"
   echo "runtime: $((SECONDS - start)) s for $3 worlds on $(nproc) cores" >> "$out/$1.txt"
 }
-if want mixed; then run mixed 20261201 112 mixed; fi
-if want none; then run none 1122026 200 none; fi
-if want group; then run group 20261202 60 group; fi
+if want mixed; then run mixed 27112026 112 mixed; fi
+if want none; then run none 1012027 200 none; fi
+if want group; then run group 2012027 60 group; fi
+if want open; then run open 28112026 28 open; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2
