@@ -1,4 +1,4 @@
-// Shared pieces of the libFuzzer targets (tests/fuzz/README.md).
+// Shared pieces of the libFuzzer targets (docs/bad-input.md, "Testing it").
 //
 // One fuzz input can hold several files. The first section is the target's main file; each line
 //   #@ NAME
