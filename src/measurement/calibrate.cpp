@@ -53,23 +53,23 @@ FitResult fit_all(const Suite& suite, const SuiteModel& model, bool noise_level,
 /// the arcs' heading, taken up by a turn-dependent wheelbase before the ratio was in). With
 /// every effect refitted, it is replaced by the simpler one unless Wilks's likelihood ratio of
 /// the two is significant at the level of its round's decision (alpha over the candidates).
+/// The fits share `cache` with the joint fit, which starts from the same model.
 void simplify_nested(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
-                     CalibrateResult& out) {
+                     ResidualCache& cache, CalibrateResult& out) {
   if (out.rounds.empty()) return;
   const double level = options.diagnose.alpha / static_cast<double>(std::max<std::size_t>(1, out.rounds.back().candidates.size()));
   const bool noise = named_noise_level(out.named);
-  ResidualCache cache(suite);
   for (std::size_t i = 0; i < out.loop_model.effects.size(); ++i) {
     const EffectSpec rich = out.loop_model.effects[i];
     const EffectInfo* info = info_of(rich);
-    if (!info || varied_by_group(out.loop_model, rich.name)) continue;
+    if (!info || info->contains.empty() || varied_by_group(out.loop_model, rich.name)) continue;
+    const FitResult with_rich = fit_all(suite, out.loop_model, noise, options, progress, cache);
     for (const std::string& simpler : info->contains) {
       const EffectInfo* s = find_effect(simpler);
       if (!s || find_spec(out.loop_model.effects, simpler)) continue;
       SuiteModel start = out.loop_model;
       start.effects[i] = EffectSpec{simpler, {}};
       for (const EffectParameterInfo& p : s->parameters) start.effects[i].values.push_back(p.neutral);
-      const FitResult with_rich = fit_all(suite, out.loop_model, noise, options, progress, cache);
       const FitResult with_simple = fit_all(suite, start, noise, options, progress, cache);
       const int dof = static_cast<int>(with_rich.names.size() - with_simple.names.size());
       const double ratio = 2.0 * (with_rich.log_likelihood_after - with_simple.log_likelihood_after);
@@ -88,18 +88,15 @@ void simplify_nested(const Suite& suite, const CalibrateOptions& options, Diagno
 /// The joint fit of everything in the loop's model, on the full likelihood; kept as the final
 /// model unless a parameter ends at a bound or the NEES mean moves further from 3 than the
 /// loop's model has it (moves_nees_away).
-void joint_fit(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
+void joint_fit(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress, ResidualCache& cache,
                CalibrateResult& out) {
-  const std::vector<std::string> names = joint_parameters(out.loop_model, named_noise_level(out.named));
+  const bool noise = named_noise_level(out.named);
   out.model = out.loop_model;
-  if (names.empty()) {
+  if (joint_parameters(out.loop_model, noise).empty()) {
     out.joint_note = "nothing to fit";
     return;
   }
-  ResidualCache cache(suite);
-  std::atomic<std::int64_t>* counter = progress ? &progress->evaluations : nullptr;
-  const FitResult fast = fit(suite, out.loop_model, names, Likelihood::full, counter, options.diagnose.path, &cache);
-  out.joint = refit_exactly(fast, names, Likelihood::full, counter, cache);
+  out.joint = fit_all(suite, out.loop_model, noise, options, progress, cache);
   if (!out.joint.at_bound.empty()) {
     out.joint_note = "not taken: the joint fit leaves parameters at a bound of their range";
     for (const std::string& p : out.joint.at_bound) out.joint_note += (p == out.joint.at_bound.front() ? " (" : ", ") + p;
@@ -135,13 +132,10 @@ FitResult design_point(CalibrateResult& out) {
   FitResult at = out.joint;
   at.model = out.model;
   if (out.rounds.empty()) return at;
-  auto in_model = [&](const std::string& name) {
-    return std::any_of(at.model.effects.begin(), at.model.effects.end(), [&](const EffectSpec& e) { return e.name == name; });
-  };
   for (const Candidate& c : out.rounds.back().candidates) {
     if (c.rule != "confounded" || c.robot) continue;
     for (const EffectSpec& spec : c.model.effects) {
-      if (in_model(spec.name) || spec.name == "group_variation") continue;
+      if (find_spec(at.model.effects, spec.name) || spec.name == kGroupVariation) continue;
       const std::vector<std::string> fitted = effect_candidate(*info_of(spec)).fitted;
       at.model.effects.push_back(spec);
       at.names.insert(at.names.end(), fitted.begin(), fitted.end());
@@ -253,8 +247,9 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
   CalibrateResult out;
   run_rounds(suite, start, options, progress, out);
   if (progress && progress->cancel.load()) throw Cancelled();
-  simplify_nested(suite, options, progress, out);
-  joint_fit(suite, options, progress, out);
+  ResidualCache cache(suite);  // the nested checks' fits and the joint fit start from one model
+  simplify_nested(suite, options, progress, cache, out);
+  joint_fit(suite, options, progress, cache, out);
   account(suite, options, out);
   out.model.domain = training_domain(suite, out.model.robot.wheelbase_m);
   out.diff_drive = diff_drive_parameters(suite, out.model);
