@@ -276,6 +276,24 @@ TEST(ResidualFeatures, SpeedNoiseLinesUpWithSpeedOnTheScatterAndANoiseExpression
   EXPECT_TRUE(after.verdict.consistent());
 }
 
+// The scatter shape rule (diagnose's rule 5, docs/calibrate.md): in the same lab, a wheel noise
+// level (a constant factor on the noise) changes the spread's size, not how it grows with the
+// speed, so with it the scatter still lines up with speed and it is not adopted; diagnose stops
+// it by that rule and names the feature. No constant-shape noise may leave the model explained.
+TEST(Verdict, ConstantNoiseLevelIsNotAdoptedForNoiseThatGrowsWithSpeed) {
+  const Suite s = lab({kSource + "/tests/data/worlds/speed_noise_lab.yaml"});
+  const Diagnosis d = diagnose(s, suite_model(s));
+  const auto level = std::find_if(d.candidates.begin(), d.candidates.end(),
+                                  [](const Candidate& c) { return c.effect == kWheelNoiseLevel; });
+  ASSERT_NE(level, d.candidates.end());
+  std::cout << "  " << level->effect << ": " << level->verdict << " (" << level->rule << ") " << level->decision << "\n";
+  EXPECT_EQ(level->verdict, "stopped");
+  EXPECT_EQ(level->rule, "scatter shape");
+  EXPECT_NE(level->decision.find("lines up with speed"), std::string::npos) << level->decision;
+  if (d.best) std::cout << "  adopted: " << d.candidates[*d.best].effect << "\n";
+  EXPECT_FALSE(d.explained);
+}
+
 TEST(Verdict, SpeedDependentScaleIsNotExplainedAndPointsAtSpeed) {
   const Suite s = lab({kSource + "/tests/data/worlds/speed_slow.yaml",
                        kSource + "/tests/data/worlds/speed_fast.yaml"});

@@ -10,6 +10,7 @@
 
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/design.hpp"
+#include "odomcov/measurement/residual_features.hpp"
 
 namespace odomcov {
 namespace {
@@ -259,6 +260,8 @@ struct Round {
   std::vector<double> base_by_experiment;
   FoldSet folds;   // the suite's (make_folds)
   FoldSet within;  // K folds over the experiments (experiment_folds), every kind in training
+  std::optional<ResidualAlignment> base_scatter_feature;  // scatter_feature of the base, once computed
+  bool base_scatter_done = false;
   std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
 
   std::atomic<std::int64_t>* counter() const { return progress ? &progress->evaluations : nullptr; }
@@ -626,6 +629,49 @@ std::vector<std::string> adoption_refit(const Round& round, Trial& t) {
   return at_bound;
 }
 
+/// True for a candidate judged on what it does to the runs' scatter: random and not grouped
+/// (group_variation acts between experiments, not within them).
+bool judged_on_scatter(const Trial& t, const SuiteModel& model) {
+  if (t.type->systematic) return false;
+  const EffectInfo* info = t.type->effect.empty() ? nullptr : find_effect(t.type->effect, model.effects);
+  return !(info && info->grouped);
+}
+
+/// The feature the scatter part of a model's misfit lines up with most, when that is
+/// significant at the family-wise `alpha` (residual_alignment: Bonferroni over every feature
+/// and part); none otherwise.
+std::optional<ResidualAlignment> scatter_feature(const Round& round, const SuiteModel& model, double alpha) {
+  for (const ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model))) {
+    if (a.part == "scatter" && a.testable && a.p_value < alpha) return a;
+  }
+  return std::nullopt;
+}
+
+/// The scatter shape rule. The scatter test of residual_alignment is blind to the spread's
+/// overall level (its gamma GLM estimates it), so a spread that grows with a feature of the
+/// path (speed, say) stays a significant feature whatever constant factor the noise takes. A
+/// random candidate that leaves the base's most significant scatter feature significant did
+/// not explain what the scatter lines up with: it only rescales the spread, and imitates a
+/// noise of another shape. Returns the decision's words when it stops the candidate.
+std::string scatter_shape(Round& round, const Trial& t) {
+  const double alpha = round.before.alpha;
+  if (!round.base_scatter_done) {
+    round.base_scatter_feature = scatter_feature(round, round.base, alpha);
+    round.base_scatter_done = true;
+  }
+  if (!round.base_scatter_feature) return {};
+  const ResidualAlignment& before = *round.base_scatter_feature;
+  for (const ResidualAlignment& a : residual_alignment(round.suite, t.c.model, round.cache.at(t.c.model))) {
+    if (a.part != "scatter" || a.feature != before.feature) continue;
+    if (!(a.testable && a.p_value < alpha)) return {};
+    return "not adopted: the runs' scatter lines up with " + before.feature + " (p = " +
+           format_number(before.p_value, "%.2g") + "), and with " + t.c.effect + " it still does (p = " +
+           format_number(a.p_value, "%.2g") + "): it changes the spread's size, not its shape, so it imitates " +
+           "a noise of another kind: " + before.description;
+  }
+  return {};
+}
+
 /// Stops a candidate by `rule` with the words of `decision`.
 bool stop(Candidate& c, const std::string& verdict, const std::string& rule, const std::string& decision) {
   c.verdict = verdict;
@@ -645,8 +691,9 @@ std::string joined(const std::vector<std::string>& list) {
 ///  2. a systematic candidate gains in the mean, not only by inflating the covariance: the
 ///     gain of its means under the base's covariances is significant at the per-candidate level;
 ///  3. it predicts the held-out folds better than the base (else it is a mimic);
-///  4. its adopted model (everything refitted) has no parameter at a bound and does not move
-///     the NEES mean away from 3 (moves_nees_away).
+///  4. its adopted model (everything refitted) has no parameter at a bound;
+///  5. a random candidate explains the shape of the scatter it is judged on (scatter_shape);
+///  6. its adopted model does not move the NEES mean away from 3 (moves_nees_away).
 bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& before, std::size_t runs) {
   Candidate& c = t.c;
   if (!c.at_bound.empty()) {
@@ -687,6 +734,10 @@ bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& bef
   if (!bounds.empty()) {
     return stop(c, "stopped", "parameter at bound",
                 "not adopted: with every effect refitted, " + joined(bounds) + " ends at the edge of its range");
+  }
+  if (judged_on_scatter(t, c.model)) {
+    const std::string shape = scatter_shape(round, t);
+    if (!shape.empty()) return stop(c, "stopped", "scatter shape", shape);
   }
   // Only the NEES mean is read: the Gaussian reference (no referee replicates) is enough.
   CalibrationOptions gaussian;

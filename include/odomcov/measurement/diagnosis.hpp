@@ -162,7 +162,8 @@ struct Candidate {
   /// (significant, ranked after the adopted one).
   std::string verdict = "not significant";
   /// The rule that stopped a stopped candidate or named a mimic: "parameter at bound",
-  /// "confounded", "covariance, not mean", "held-out likelihood", "NEES", "nested" (a simpler
+  /// "confounded", "covariance, not mean", "held-out likelihood", "scatter shape" (a random
+  /// candidate that leaves the scatter's feature significant), "NEES", "nested" (a simpler
   /// candidate it contains fits as well), "consistency", "" otherwise.
   std::string rule;
   std::string decision;  // the verdict in plain words
