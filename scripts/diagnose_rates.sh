@@ -15,7 +15,9 @@
 # rounds) and the referee's alpha spending over its looks, rerun with new seeds again: mixed
 # 27112026, none 1012027, group 2012027; and 28 worlds of physics in no catalogue (open,
 # 28112026). (The nested rule came from world 96 of seed 20261201; its check after the rounds
-# from worlds 15 and 73 of seed 31122026, which is not reported.)
+# from worlds 15 and 73 of seed 31122026, which is not reported.) The scatter shape rule came from
+# the speed-noise worlds of the open batch 28112026; it changed no world of the mixed batch
+# 27112026, and the open batch was rerun with a new seed, 29112026.
 #   scripts/diagnose_rates.sh            # the four batches
 #   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, or pilot (16 worlds)
 set -euo pipefail
@@ -37,6 +39,6 @@ run() {  # name seed worlds cases
 if want mixed; then run mixed 27112026 112 mixed; fi
 if want none; then run none 1012027 200 none; fi
 if want group; then run group 2012027 60 group; fi
-if want open; then run open 28112026 28 open; fi
+if want open; then run open 29112026 28 open; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2
