@@ -637,12 +637,16 @@ bool judged_on_scatter(const Trial& t, const SuiteModel& model) {
   return !(info && info->grouped);
 }
 
-/// The feature the scatter part of a model's misfit lines up with most, when that is
-/// significant at the family-wise `alpha` (residual_alignment: Bonferroni over every feature
-/// and part); none otherwise.
+/// The feature of the path the scatter part of a model's misfit lines up with most, when that
+/// is significant at the family-wise `alpha` (residual_alignment with the dispersion from the
+/// model's simulated world: Bonferroni over every feature and part); none otherwise. Not the
+/// group: a spread that differs between sessions is no shape of noise along the path, and no
+/// candidate of the catalogue varies with the session, so it tells none of them apart (real
+/// labs show it nearly always).
 std::optional<ResidualAlignment> scatter_feature(const Round& round, const SuiteModel& model, double alpha) {
-  for (const ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model))) {
-    if (a.part == "scatter" && a.testable && a.p_value < alpha) return a;
+  const SimulatedDispersion simulated{round.seed};
+  for (const ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model), &simulated)) {
+    if (a.part == "scatter" && a.feature != "group" && a.testable && a.p_value < alpha) return a;
   }
   return std::nullopt;
 }
@@ -661,7 +665,8 @@ std::string scatter_shape(Round& round, const Trial& t) {
   }
   if (!round.base_scatter_feature) return {};
   const ResidualAlignment& before = *round.base_scatter_feature;
-  for (const ResidualAlignment& a : residual_alignment(round.suite, t.c.model, round.cache.at(t.c.model))) {
+  const SimulatedDispersion simulated{round.seed};
+  for (const ResidualAlignment& a : residual_alignment(round.suite, t.c.model, round.cache.at(t.c.model), &simulated)) {
     if (a.part != "scatter" || a.feature != before.feature) continue;
     if (!(a.testable && a.p_value < alpha)) return {};
     return "not adopted: the runs' scatter lines up with " + before.feature + " (p = " +

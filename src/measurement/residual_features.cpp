@@ -3,9 +3,14 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
 #include <map>
+#include <optional>
+
+#include "odomcov/effects/effects.hpp"
+#include "odomcov/measurement/referee.hpp"
 
 namespace odomcov {
 namespace {
@@ -223,6 +228,9 @@ struct ExperimentMean {
   std::string group;
   double scatter = 0.0;  // s_e = W_e / E[W_e]: 1 when the predicted spread is right
   double shape = 0.0;    // nu_e/2 = 3 (n - 1)/2, the gamma shape of s_e; 0: no scatter part
+  double dispersion = 0.0;  // phi_e = shape * Var(s_e) in the model's simulated world; 0: unknown
+  std::size_t experiment = 0;  // its index in the suite
+  std::vector<Matrix3> frames, covs;  // each run's end frame and its covariance in it
 };
 
 /// RSS of the GLS fit of r_e = X_e b over the experiments.
@@ -347,6 +355,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
     const RunResidual& res = residuals[e][r];
     runs.push_back(R * (res.error - res.mean));
     covs.push_back(R * res.cov * R.transpose());
+    m.frames.push_back(R);
     m.r += runs.back() / n;
     for (int j = 0; j < kDim; ++j) {
       m.S.col(j) += R * (nudges[static_cast<std::size_t>(j)][e][r].mean - res.mean) / (kSensitivityStep * n);
@@ -359,7 +368,9 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
   m.W = ldlt.solve(Matrix3::Identity());
   m.features = sum;
   m.group = experiment_group(ex);
+  m.experiment = e;
   experiment_scatter(runs, covs, m);
+  m.covs = std::move(covs);
   return true;
 }
 
@@ -486,22 +497,74 @@ GammaFit gamma_fit(const Eigen::VectorXd& s, const Eigen::VectorXd& k, const Eig
 
 /// Scatter part: the gamma GLM of the experiments' scatter ratios on the design X1 (an
 /// intercept first) against the intercept alone, with the dispersion estimated from H1's
-/// Pearson statistic: F = ((D0 - D1)/q) / (X1^2/(m - p1)) ~ F(q, m - p1).
+/// Pearson statistic: F = ((D0 - D1)/q) / (X1^2/(m - p1)) ~ F(q, m - p1); or, when every
+/// experiment's dispersion is known from the model's simulated world, with the weights k_e/phi_e:
+/// D0 - D1 ~ chi^2(q).
 void scatter_test(const std::vector<const ExperimentMean*>& ms, const Eigen::MatrixXd& X1, ResidualAlignment& a) {
   const auto m = static_cast<Eigen::Index>(ms.size());
   const auto p1 = X1.cols();
   if (p1 < 2 || m - p1 <= 0) return;
   Eigen::VectorXd s(m), k(m);
+  bool known = true;
   for (Eigen::Index e = 0; e < m; ++e) {
-    s(e) = ms[static_cast<std::size_t>(e)]->scatter;
-    k(e) = ms[static_cast<std::size_t>(e)]->shape;
+    const ExperimentMean& x = *ms[static_cast<std::size_t>(e)];
+    s(e) = x.scatter;
+    k(e) = x.dispersion > 0 ? x.shape / x.dispersion : x.shape;
+    known = known && x.dispersion > 0;
   }
   const GammaFit h0 = gamma_fit(s, k, Eigen::MatrixXd::Ones(m, 1));
   const GammaFit h1 = gamma_fit(s, k, X1);
   if (!h0.ok || !h1.ok) return;
   const auto q = static_cast<int>(p1 - 1), dof2 = static_cast<int>(m - p1);
-  const double dispersion = h1.pearson / dof2;
-  f_result(std::max(0.0, (h0.deviance - h1.deviance) / q) / dispersion, q, dof2, a);
+  if (!known) {
+    const double dispersion = h1.pearson / dof2;
+    f_result(std::max(0.0, (h0.deviance - h1.deviance) / q) / dispersion, q, dof2, a);
+    return;
+  }
+  a.dof1 = q;
+  a.dof2 = 0;
+  a.statistic = std::max(0.0, h0.deviance - h1.deviance);
+  a.p_value_raw = a.statistic > 0 ? boost::math::cdf(boost::math::complement(boost::math::chi_squared(q), a.statistic)) : 1.0;
+  a.testable = true;
+}
+
+/// Each experiment's dispersion phi_e = k_e Var(s_e) over `replicates` suites simulated from the
+/// model: the runs' errors drawn anew, their scatter ratio computed as the data's (the same
+/// predicted means, covariances and end frames). Left at 0 (unknown) when the model's effects
+/// cannot be simulated on some run, or a replicate's ratio is not finite.
+void simulated_dispersions(const Suite& suite, const SuiteModel& model, const Residuals& residuals,
+                           const SimulatedDispersion& sim, std::vector<ExperimentMean>& ms) {
+  std::vector<Vector3> errors;
+  std::size_t runs = 0;
+  try {
+    const ModelWorld world(suite, model, sim.seed);
+    world.errors(0, sim.replicates, errors);
+    runs = world.runs();
+  } catch (const EffectError&) {
+    return;
+  }
+  std::vector<std::size_t> first(suite.experiments.size() + 1, 0);
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) first[e + 1] = first[e] + suite.experiments[e].runs.size();
+  std::vector<Vector3> r;
+  for (ExperimentMean& m : ms) {
+    if (!(m.shape > 0)) continue;
+    const std::size_t e = m.experiment, n = suite.experiments[e].runs.size();
+    double mean = 0.0, m2 = 0.0;  // Welford over the replicates
+    bool ok = true;
+    for (int b = 0; b < sim.replicates && ok; ++b) {
+      r.clear();
+      for (std::size_t i = 0; i < n; ++i) {
+        r.push_back(m.frames[i] * (errors[static_cast<std::size_t>(b) * runs + first[e] + i] - residuals[e][i].mean));
+      }
+      ExperimentMean x;
+      experiment_scatter(r, m.covs, x);
+      ok = x.shape > 0 && std::isfinite(x.scatter);
+      const double delta = x.scatter - mean;
+      mean += delta / (b + 1);
+      m2 += delta * (x.scatter - mean);
+    }
+    if (ok && sim.replicates > 1) m.dispersion = m.shape * m2 / (sim.replicates - 1);
+  }
 }
 
 /// The scatter part of one feature: log E s_e linear in the feature's columns (a variance that
@@ -575,8 +638,9 @@ const std::vector<std::string>& residual_feature_names() {
 
 std::vector<ResidualAlignment> residual_alignment(
     const Suite& suite, const SuiteModel& model,
-    const std::vector<std::vector<RunResidual>>& residuals) {
-  const std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals);
+    const std::vector<std::vector<RunResidual>>& residuals, const SimulatedDispersion* simulated) {
+  std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals);
+  if (simulated) simulated_dispersions(suite, model, residuals, *simulated, ms);
   // Mean part, H0: the misfit is a constant offset in the end frame plus constant factor
   // errors, r_e = [I3 S_e] c. H1 adds the same terms modulated by the feature, f_e [I3 S_e] d: a
   // scale, wheelbase or diameter ratio (or an offset) that varies with the feature.

@@ -6,6 +6,7 @@
 // inconsistent, this says what kind of effect is missing, in the catalogue or not.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -97,8 +98,24 @@ struct ResidualAlignment {
 /// heavier than Gaussian do not count (heading: two columns, F(2, m - 3)). group: log E s_e per
 /// group against a common one.
 /// Each p_value is Bonferroni-corrected over every testable feature and part.
+///
+/// With `simulated`, the scatter part takes its dispersion from the model's own world instead:
+/// `replicates` suites simulated from the model (ModelWorld, `seed`) give each experiment's
+/// variance of s_e under the model, phi_e / k_e (phi_e = 1 for Gaussian errors, above 1 when the
+/// model's errors have heavier tails: bumps, a per-run radius); the GLM's weights are then
+/// k_e / phi_e and D0 - D1 ~ chi^2(q) (statistic D0 - D1, dof2 = 0). A spread that varies with
+/// the feature more than the model's own sampling lets it counts, and nothing else estimates the
+/// dispersion, so a misfit elsewhere does not dilute it: the sharper test, for the decisions
+/// that ask whether a candidate explained the shape of the scatter (diagnose's scatter shape
+/// rule). Without `simulated`, or when the model's effects cannot be simulated on every run, the
+/// F test above.
+struct SimulatedDispersion {
+  std::uint64_t seed = 1;
+  int replicates = 99;
+};
+
 std::vector<ResidualAlignment> residual_alignment(
     const Suite& suite, const SuiteModel& model,
-    const std::vector<std::vector<RunResidual>>& residuals);
+    const std::vector<std::vector<RunResidual>>& residuals, const SimulatedDispersion* simulated = nullptr);
 
 }  // namespace odomcov
