@@ -16,8 +16,10 @@
 # 27112026, none 1012027, group 2012027; and 28 worlds of physics in no catalogue (open,
 # 28112026). (The nested rule came from world 96 of seed 20261201; its check after the rounds
 # from worlds 15 and 73 of seed 31122026, which is not reported.) The scatter shape rule came from
-# the speed-noise worlds of the open batch 28112026; it changed no world of the mixed batch
-# 27112026, and the open batch was rerun with a new seed, 29112026.
+# the speed-noise worlds of the open batch 28112026 (and, with the dispersion from the model's
+# simulated world, the open batch 29112026 and the OptiOdom circles held out); it changed no
+# world of the mixed batch 27112026. The batches were then rerun with new seeds: mixed 8122026,
+# none 9122027, group 10122026, open 3122026.
 #   scripts/diagnose_rates.sh            # the four batches
 #   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, or pilot (16 worlds)
 set -euo pipefail
@@ -36,9 +38,9 @@ run() {  # name seed worlds cases
     --seed "$2" --worlds "$3" --cases "$4" --out "$work/$1" --report "$out/$1.json" > "$out/$1.txt"
   echo "runtime: $((SECONDS - start)) s for $3 worlds on $(nproc) cores" >> "$out/$1.txt"
 }
-if want mixed; then run mixed 27112026 112 mixed; fi
-if want none; then run none 1012027 200 none; fi
-if want group; then run group 2012027 60 group; fi
-if want open; then run open 29112026 28 open; fi
+if want mixed; then run mixed 8122026 112 mixed; fi
+if want none; then run none 9122027 200 none; fi
+if want group; then run group 10122026 60 group; fi
+if want open; then run open 3122026 28 open; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2
