@@ -652,11 +652,15 @@ std::optional<ResidualAlignment> scatter_feature(const Round& round, const Suite
 }
 
 /// The scatter shape rule. The scatter test of residual_alignment is blind to the spread's
-/// overall level (its gamma GLM estimates it), so a spread that grows with a feature of the
-/// path (speed, say) stays a significant feature whatever constant factor the noise takes. A
-/// random candidate that leaves the base's most significant scatter feature significant did
-/// not explain what the scatter lines up with: it only rescales the spread, and imitates a
-/// noise of another shape. Returns the decision's words when it stops the candidate.
+/// overall level (its gamma GLM fits it), so a spread that grows with a feature of the path
+/// (speed, say) stays a significant feature whatever constant factor the noise takes, and a
+/// noise of another shape (a slip per radian turned) leaves it too. A random candidate that
+/// leaves the base's most significant scatter feature significant did not explain what the
+/// scatter lines up with: it imitates a noise of another shape. The test takes each
+/// experiment's dispersion from the model's simulated world (SimulatedDispersion): with it
+/// estimated from the data, a misfit of other experiments dilutes the feature, and a slip per
+/// radian turned took up a noise that grows with speed in blind worlds whose fast runs spin.
+/// Returns the decision's words when it stops the candidate.
 std::string scatter_shape(Round& round, const Trial& t) {
   const double alpha = round.before.alpha;
   if (!round.base_scatter_done) {
@@ -671,8 +675,8 @@ std::string scatter_shape(Round& round, const Trial& t) {
     if (!(a.testable && a.p_value < alpha)) return {};
     return "not adopted: the runs' scatter lines up with " + before.feature + " (p = " +
            format_number(before.p_value, "%.2g") + "), and with " + t.c.effect + " it still does (p = " +
-           format_number(a.p_value, "%.2g") + "): it changes the spread's size, not its shape, so it imitates " +
-           "a noise of another kind: " + before.description;
+           format_number(a.p_value, "%.2g") + "): it does not give the spread that shape, so it imitates a " +
+           "noise of another kind: " + before.description;
   }
   return {};
 }
