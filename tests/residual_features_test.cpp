@@ -20,29 +20,39 @@ namespace {
 
 const std::string kSource = ODOMCOV_SOURCE_DIR;
 
-/// The suite synth would write for these worlds, in memory (the first world's nominal robot),
-/// with each run's start heading where the world gives one (synth's heading0 column).
+/// Adds world `w`'s experiments to `s` as synth writes them at the world's seed (its robot and
+/// measurement noise too), with each run's start heading where the world gives one (synth's
+/// heading0 column).
+void add_world(Suite& s, const WorldFile& w) {
+  s.robot = w.robot;
+  s.measurement_noise = w.measurement_noise;
+  for (std::size_t i = 0; i < w.experiments.size(); ++i) {
+    SuiteExperiment ex;
+    ex.name = w.experiments[i].name;
+    ex.path = w.experiments[i].path;
+    const std::vector<Vector3> measured = synthesize(w, i);
+    const std::vector<double> heading0 = start_headings(w, i);
+    for (std::size_t r = 0; r < measured.size(); ++r) {
+      ex.runs.push_back({std::to_string(r + 1), measured[r], {}, {}});
+      if (!heading0.empty()) ex.runs.back().heading0_rad = heading0[r], ex.runs.back().heading0_given = true;
+    }
+    s.experiments.push_back(std::move(ex));
+  }
+}
+
+/// The suite synth would write for these worlds, in memory (the last world's nominal robot).
 Suite lab(const std::vector<std::string>& world_files) {
   Suite s;
   s.file = "in-memory";
   s.name = "lab";
-  for (const std::string& file : world_files) {
-    const WorldFile w = load_world(file);
-    s.robot = w.robot;
-    s.measurement_noise = w.measurement_noise;
-    for (std::size_t i = 0; i < w.experiments.size(); ++i) {
-      SuiteExperiment ex;
-      ex.name = w.experiments[i].name;
-      ex.path = w.experiments[i].path;
-      const std::vector<Vector3> measured = synthesize(w, i, 1);
-      const std::vector<double> heading0 = start_headings(w, i);
-      for (std::size_t r = 0; r < measured.size(); ++r) {
-        ex.runs.push_back({std::to_string(r + 1), measured[r], {}, {}});
-        if (!heading0.empty()) ex.runs.back().heading0_rad = heading0[r], ex.runs.back().heading0_given = true;
-      }
-      s.experiments.push_back(std::move(ex));
-    }
-  }
+  for (const std::string& file : world_files) add_world(s, load_world(file));
+  return s;
+}
+
+/// One lab of world `w` at its seed, in memory.
+Suite seeded_lab(const WorldFile& w) {
+  Suite s;
+  add_world(s, w);
   return s;
 }
 
@@ -165,17 +175,7 @@ TEST(ResidualFeatures, BothPartsHaveTheirSizeOnCorrectModels) {
   std::map<std::string, int> rejected, tested;
   for (int i = 0; i < kLabs; ++i) {
     w.seed = 1000 + static_cast<std::uint64_t>(i);
-    Suite s;
-    s.robot = w.robot;
-    s.measurement_noise = w.measurement_noise;
-    for (std::size_t e = 0; e < w.experiments.size(); ++e) {
-      SuiteExperiment ex;
-      ex.name = w.experiments[e].name;
-      ex.path = w.experiments[e].path;
-      const std::vector<Vector3> measured = synthesize(w, e, 0);
-      for (std::size_t r = 0; r < measured.size(); ++r) ex.runs.push_back({std::to_string(r), measured[r], {}, {}});
-      s.experiments.push_back(std::move(ex));
-    }
+    const Suite s = seeded_lab(w);
     const SuiteModel model = suite_model(s);
     for (const ResidualAlignment& a : residual_alignment(s, model, residuals(s, model))) {
       if (!a.testable) continue;
@@ -210,17 +210,7 @@ TEST(ResidualFeatures, SimulatedDispersionKeepsTheScatterTestsSizeOnHeavyTails) 
   std::map<std::string, int> rejected, tested;
   for (int i = 0; i < kLabs; ++i) {
     w.seed = 2000 + static_cast<std::uint64_t>(i);
-    Suite s;
-    s.robot = w.robot;
-    s.measurement_noise = w.measurement_noise;
-    for (std::size_t e = 0; e < w.experiments.size(); ++e) {
-      SuiteExperiment ex;
-      ex.name = w.experiments[e].name;
-      ex.path = w.experiments[e].path;
-      const std::vector<Vector3> measured = synthesize(w, e, 0);
-      for (std::size_t r = 0; r < measured.size(); ++r) ex.runs.push_back({std::to_string(r), measured[r], {}, {}});
-      s.experiments.push_back(std::move(ex));
-    }
+    const Suite s = seeded_lab(w);
     SuiteModel model = suite_model(s);
     model.effects = w.world.effects;
     const SimulatedDispersion simulated{7000 + static_cast<std::uint64_t>(i)};
