@@ -260,7 +260,7 @@ struct Round {
   std::vector<double> base_by_experiment;
   FoldSet folds;   // the suite's (make_folds)
   FoldSet within;  // K folds over the experiments (experiment_folds), every kind in training
-  std::optional<ResidualAlignment> base_scatter_feature;  // scatter_feature of the base, once computed
+  std::optional<ResidualAlignment> base_scatter_feature;  // the base's, when significant (scatter_shape)
   bool base_scatter_done = false;
   std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
 
@@ -344,13 +344,15 @@ std::vector<std::vector<RunResidual>> with_means(const std::vector<std::vector<R
   return base;
 }
 
-/// True for a candidate judged on what it does to the mean: systematic and not grouped
-/// (group_variation acts through the correlation of a group's runs).
-bool judged_on_mean(const Trial& t, const SuiteModel& model) {
-  if (!t.type->systematic) return false;
+/// True for a grouped candidate (group_variation), which acts through the correlation of a
+/// group's runs, neither on each run's mean nor on the spread within an experiment.
+bool grouped(const Trial& t, const SuiteModel& model) {
   const EffectInfo* info = t.type->effect.empty() ? nullptr : find_effect(t.type->effect, model.effects);
-  return !(info && info->grouped);
+  return info && info->grouped;
 }
+
+/// True for a candidate judged on what it does to the mean: systematic and not grouped.
+bool judged_on_mean(const Trial& t, const SuiteModel& model) { return t.type->systematic && !grouped(t, model); }
 
 /// The largest |correlation| of the estimates of a fit's own parameters (from index `first`
 /// on) with the parameters before them, the model's effects refitted beside them; 1 when an own
@@ -629,26 +631,21 @@ std::vector<std::string> adoption_refit(const Round& round, Trial& t) {
   return at_bound;
 }
 
-/// True for a candidate judged on what it does to the runs' scatter: random and not grouped
-/// (group_variation acts between experiments, not within them).
-bool judged_on_scatter(const Trial& t, const SuiteModel& model) {
-  if (t.type->systematic) return false;
-  const EffectInfo* info = t.type->effect.empty() ? nullptr : find_effect(t.type->effect, model.effects);
-  return !(info && info->grouped);
-}
+/// True for a candidate judged on what it does to the runs' scatter: random and not grouped.
+bool judged_on_scatter(const Trial& t, const SuiteModel& model) { return !t.type->systematic && !grouped(t, model); }
 
-/// The feature of the path the scatter part of a model's misfit lines up with most, when that
-/// is significant at the family-wise `alpha` (residual_alignment with the dispersion from the
-/// model's simulated world: Bonferroni over every feature and part); none otherwise. Not the
-/// group: a spread that differs between sessions is no shape of noise along the path, and no
-/// candidate of the catalogue varies with the session, so it tells none of them apart (real
-/// labs show it nearly always).
-std::optional<ResidualAlignment> scatter_feature(const Round& round, const SuiteModel& model, double alpha) {
+/// A model's scatter features of the path, each with its family-wise p-value (residual_alignment
+/// with the dispersion from the model's simulated world: Bonferroni over every feature and
+/// part), best first. Not the group: a spread that differs between sessions is no shape of
+/// noise along the path, and no candidate of the catalogue varies with the session, so it
+/// tells none of them apart (real labs show it nearly always).
+std::vector<ResidualAlignment> scatter_features(const Round& round, const SuiteModel& model) {
   const SimulatedDispersion simulated{round.seed};
-  for (const ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model), &simulated)) {
-    if (a.part == "scatter" && a.feature != "group" && a.testable && a.p_value < alpha) return a;
+  std::vector<ResidualAlignment> out;
+  for (ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model), &simulated)) {
+    if (a.part == "scatter" && a.feature != "group" && a.testable) out.push_back(std::move(a));
   }
-  return std::nullopt;
+  return out;
 }
 
 /// The scatter shape rule. The scatter test of residual_alignment is blind to the spread's
@@ -664,15 +661,15 @@ std::optional<ResidualAlignment> scatter_feature(const Round& round, const Suite
 std::string scatter_shape(Round& round, const Trial& t) {
   const double alpha = round.before.alpha;
   if (!round.base_scatter_done) {
-    round.base_scatter_feature = scatter_feature(round, round.base, alpha);
+    const std::vector<ResidualAlignment> base = scatter_features(round, round.base);
+    if (!base.empty() && base.front().p_value < alpha) round.base_scatter_feature = base.front();
     round.base_scatter_done = true;
   }
   if (!round.base_scatter_feature) return {};
   const ResidualAlignment& before = *round.base_scatter_feature;
-  const SimulatedDispersion simulated{round.seed};
-  for (const ResidualAlignment& a : residual_alignment(round.suite, t.c.model, round.cache.at(t.c.model), &simulated)) {
-    if (a.part != "scatter" || a.feature != before.feature) continue;
-    if (!(a.testable && a.p_value < alpha)) return {};
+  for (const ResidualAlignment& a : scatter_features(round, t.c.model)) {
+    if (a.feature != before.feature) continue;
+    if (!(a.p_value < alpha)) return {};
     return "not adopted: the runs' scatter lines up with " + before.feature + " (p = " +
            format_number(before.p_value, "%.2g") + "), and with " + t.c.effect + " it still does (p = " +
            format_number(a.p_value, "%.2g") + "): it does not give the spread that shape, so it imitates a " +
