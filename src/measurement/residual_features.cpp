@@ -504,13 +504,13 @@ void scatter_test(const std::vector<const ExperimentMean*>& ms, const Eigen::Mat
   const auto m = static_cast<Eigen::Index>(ms.size());
   const auto p1 = X1.cols();
   if (p1 < 2 || m - p1 <= 0) return;
+  // Known only when every experiment's is: otherwise the F test, on the shapes alone.
+  const bool known = std::all_of(ms.begin(), ms.end(), [](const ExperimentMean* x) { return x->dispersion > 0; });
   Eigen::VectorXd s(m), k(m);
-  bool known = true;
   for (Eigen::Index e = 0; e < m; ++e) {
     const ExperimentMean& x = *ms[static_cast<std::size_t>(e)];
     s(e) = x.scatter;
-    k(e) = x.dispersion > 0 ? x.shape / x.dispersion : x.shape;
-    known = known && x.dispersion > 0;
+    k(e) = known ? x.shape / x.dispersion : x.shape;
   }
   const GammaFit h0 = gamma_fit(s, k, Eigen::MatrixXd::Ones(m, 1));
   const GammaFit h1 = gamma_fit(s, k, X1);
