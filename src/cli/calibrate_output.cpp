@@ -47,6 +47,8 @@ json decision_json(const Candidate& c) {
   return {{"exact", c.exact},
           {"delta_mean_log_likelihood", finite_or_null(c.delta_mean_log_likelihood)},
           {"mean_p_value", finite_or_null(c.mean_p_value)},
+          {"mean_dispersion", finite_or_null(c.mean_dispersion)},
+          {"mean_p_value_dispersed", finite_or_null(c.mean_p_value_dispersed)},
           {"gain_held_out", finite_or_null(c.delta_held_out)},
           {"held_out_by_fold", folds},
           {"at_bound", c.at_bound},

@@ -5,6 +5,8 @@
 #include <limits>
 #include <map>
 
+#include "odomcov/base/format.hpp"
+
 namespace odomcov {
 namespace {
 
@@ -74,6 +76,26 @@ Folds experiment_folds(const Suite& suite) {
   if (suite.experiments.size() < 2) return {};
   const Labels each = labels_of(suite, [](const SuiteExperiment& ex) { return ex.name; });
   return folds_of("experiments", each);
+}
+
+Folds feature_folds(const std::vector<double>& values, const std::string& feature) {
+  std::vector<double> known;
+  for (double v : values) {
+    if (std::isfinite(v)) known.push_back(v);
+  }
+  if (known.size() < 2) return {};
+  std::sort(known.begin(), known.end());
+  const double median = known[known.size() / 2];
+  // Below the median, else at or below it when nothing lies below (ties at the bottom).
+  const bool below = known.front() < median;
+  const auto high = [&](double v) { return below ? v >= median : v > median; };
+  if (!below && !(known.back() > median)) return {};
+  Folds f;
+  f.by = "feature";
+  const std::string edge = format_number(median, "%.3g");
+  f.names = {feature + (below ? " below " : " up to ") + edge, feature + (below ? " from " : " above ") + edge};
+  for (double v : values) f.of_experiment.push_back(std::isfinite(v) && high(v) ? 1 : 0);
+  return f;
 }
 
 double log_likelihood_of(const std::vector<std::vector<RunResidual>>& residuals, Likelihood kind) {

@@ -6,6 +6,7 @@
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <optional>
 
@@ -626,6 +627,38 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
 }
 
 std::string experiment_group(const SuiteExperiment& ex) { return group_key(ex); }
+
+std::vector<double> experiment_feature_values(const Suite& suite, double wheelbase_m, const std::string& feature) {
+  const auto f = std::find_if(features().begin(), features().end(),
+                              [&](const Feature& x) { return feature == x.name && x.columns > 0; });
+  std::vector<double> out(suite.experiments.size(), std::numeric_limits<double>::quiet_NaN());
+  if (f == features().end()) return out;
+  std::vector<PathFeatures> means(suite.experiments.size());
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+    const SuiteExperiment& ex = suite.experiments[e];
+    means[e].heading_known = true;
+    for (const SuiteRun& run : ex.runs) {
+      add_features(means[e], path_features(ex, run, wheelbase_m), static_cast<double>(ex.runs.size()));
+    }
+    if (f->needs_heading && !ex.runs.empty() && !means[e].heading_known) return out;
+  }
+  // The column that varies more (the heading's cos or sin).
+  int column = 0;
+  double widest = -1.0;
+  for (int c = 0; c < f->columns; ++c) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (std::size_t e = 0; e < means.size(); ++e) {
+      if (suite.experiments[e].runs.empty()) continue;
+      lo = std::min(lo, f->value(means[e], c));
+      hi = std::max(hi, f->value(means[e], c));
+    }
+    if (hi - lo > widest) widest = hi - lo, column = c;
+  }
+  for (std::size_t e = 0; e < means.size(); ++e) {
+    if (!suite.experiments[e].runs.empty()) out[e] = f->value(means[e], column);
+  }
+  return out;
+}
 
 const std::vector<std::string>& residual_feature_names() {
   static const std::vector<std::string> names = [] {

@@ -45,6 +45,13 @@ Folds make_folds(const Suite& suite);
 /// that no kind of path can test (each fold then keeps every kind in its training runs).
 Folds experiment_folds(const Suite& suite);
 
+/// Two folds along a feature of the path: the experiments below the median of `values` (one
+/// per experiment, experiment_feature_values) and those at or above it, so that a fit on one
+/// side predicts the other (by = "feature"). When ties leave one side empty, the split is at
+/// the median's other edge; none when every experiment has the same value. An experiment
+/// without a value (no runs) joins the first fold.
+Folds feature_folds(const std::vector<double>& values, const std::string& feature);
+
 /// A fit repeated on each fold's complement.
 struct FoldFits {
   std::vector<SuiteModel> models;  // per fold: fitted on every other fold's runs

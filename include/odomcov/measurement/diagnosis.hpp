@@ -132,6 +132,11 @@ struct Candidate {
   /// that gain's likelihood-ratio p-value.
   double delta_mean_log_likelihood = std::numeric_limits<double>::quiet_NaN();
   double mean_p_value = std::numeric_limits<double>::quiet_NaN();
+  /// How far the experiments' mean errors scatter, with the candidate in, beyond what the model
+  /// predicts (the quasi-likelihood dispersion, at least 1), and that gain's p-value against it
+  /// (the F test; the likelihood ratio's when it is 1). NaN where mean_p_value is.
+  double mean_dispersion = std::numeric_limits<double>::quiet_NaN();
+  double mean_p_value_dispersed = std::numeric_limits<double>::quiet_NaN();
   /// The gain in held-out log-likelihood over the base (its part of the likelihood), summed
   /// over the folds that can test it, each fold predicted by the candidate and by the base both
   /// fitted without it; and per fold. NaN / empty when it was not cross-validated.
@@ -162,9 +167,10 @@ struct Candidate {
   /// (significant, ranked after the adopted one).
   std::string verdict = "not significant";
   /// The rule that stopped a stopped candidate or named a mimic: "parameter at bound",
-  /// "confounded", "covariance, not mean", "held-out likelihood", "scatter shape" (a random
-  /// candidate that leaves the scatter's feature significant), "NEES", "nested" (a simpler
-  /// candidate it contains fits as well), "consistency", "" otherwise.
+  /// "confounded", "covariance, not mean", "held-out likelihood", "across the feature" (a
+  /// systematic candidate that does not predict across the base's mean feature), "scatter
+  /// shape" (a random candidate that leaves the scatter's feature significant), "NEES",
+  /// "nested" (a simpler candidate it contains fits as well), "consistency", "" otherwise.
   std::string rule;
   std::string decision;  // the verdict in plain words
   std::vector<std::string> at_bound;  // parameters its fit left at a bound (FitResult::at_bound)

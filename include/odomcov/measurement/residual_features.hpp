@@ -47,6 +47,12 @@ inline constexpr double kAccelerationHysteresis_mps = 0.05;
 /// (SuiteRun::durations_s). The one place that reads a run's motion for the residual analysis.
 PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, double wheelbase_m);
 
+/// Each experiment's value of a path feature (residual_feature_names; not "group"): its runs'
+/// mean, as the mean part's test reads it; for a feature of two columns (heading) the column
+/// that varies more across the experiments. NaN for an experiment without runs, and for every
+/// experiment when the feature is unknown (no such feature, or a heading not every run gives).
+std::vector<double> experiment_feature_values(const Suite& suite, double wheelbase_m, const std::string& feature);
+
 /// The group an experiment belongs to, for the between-group test: the suite's `group:` key
 /// (group_key: an experiment without one is a group of its own).
 std::string experiment_group(const SuiteExperiment& ex);
