@@ -38,9 +38,9 @@ run() {  # name seed worlds cases
     --seed "$2" --worlds "$3" --cases "$4" --out "$work/$1" --report "$out/$1.json" > "$out/$1.txt"
   echo "runtime: $((SECONDS - start)) s for $3 worlds on $(nproc) cores" >> "$out/$1.txt"
 }
-if want mixed; then run mixed 8122026 112 mixed; fi
-if want none; then run none 9122027 200 none; fi
-if want group; then run group 10122026 60 group; fi
-if want open; then run open 3122026 28 open; fi
+if want mixed; then run mixed 15122026 112 mixed; fi
+if want none; then run none 16122027 200 none; fi
+if want group; then run group 17122026 60 group; fi
+if want open; then run open 18122026 28 open; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2

@@ -154,6 +154,28 @@ TEST(Diagnose, FastAndExactAgreeOnTheWinnerWithANonlinearCandidate) {
   for (const Candidate& c : exact.candidates) EXPECT_EQ(candidate(d, c.effect).significant, c.significant) << c.effect;
 }
 
+TEST(Diagnose, TwoLargeEffectsAreEachJudgedAgainstTheScatterTheirOwnModelLeaves) {
+  // A wheel scale and a wheelbase, both large. Against the base's scatter (both misfits) no
+  // gain would stand out; against the scatter its own model leaves (the other's misfit, here
+  // a dispersion above 1000) the first-ranked one does, because it explains more than the
+  // other leaves over the experiments' many degrees of freedom. It is adopted, and the next
+  // round adopts the other.
+  const Suite lab = test::synth_suite(standard_world({{"scale_error", {1.01}}, {"wheelbase_error", {1.02}}}, 13), "two");
+  const Diagnosis d = diagnose(lab, suite_model(lab), kDiagnoseAlpha, {"scale_error", "wheelbase_error"});
+  ASSERT_TRUE(d.best);
+  const Candidate& first = d.candidates[*d.best];
+  std::printf("%s: dispersion %.3g, p %.2g\n", first.effect.c_str(), first.mean_dispersion, first.mean_p_value_dispersed);
+  EXPECT_GT(first.mean_dispersion, 100.0);
+  EXPECT_LT(first.mean_p_value_dispersed, kDiagnoseAlpha);
+  const Diagnosis next = diagnose(lab, first.model, kDiagnoseAlpha, {"scale_error", "wheelbase_error"});
+  ASSERT_TRUE(next.best);
+  const Candidate& second = next.candidates[*next.best];
+  EXPECT_LT(second.mean_dispersion, 2.0);  // nothing left beside it
+  std::vector<std::string> named = {first.effect, second.effect};
+  std::sort(named.begin(), named.end());
+  EXPECT_EQ(named, (std::vector<std::string>{"scale_error", "wheelbase_error"}));
+}
+
 TEST(Diagnose, AMimicIsNamedAndNotAdopted) {
   // Tyre scrub on arcs only (Eb_arc = 1.02, spins at 1): offered only a single wheelbase, the
   // loop finds it significant in-sample (a compromise between arcs and spins), but with it

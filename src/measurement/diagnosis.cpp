@@ -7,9 +7,9 @@
 #include <boost/math/distributions/normal.hpp>
 #include <cmath>
 #include <limits>
-#include <utility>
 #include <cstdio>
 #include <cstdlib>
+#include <utility>
 
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/design.hpp"
@@ -299,6 +299,11 @@ struct Round {
   FoldSet across;  // the halves of the base's mean feature (feature_folds), once it is known
   std::optional<ResidualAlignment> base_mean_feature;  // the base's, when significant (across_feature)
   bool base_mean_done = false;
+  /// The round's full model (the base with every significant candidate judged on the mean) and
+  /// the names it fits, fitted the first time a candidate needs it (full_model_dispersion).
+  SuiteModel full;
+  std::vector<std::string> full_names;
+  std::optional<MeanDispersion> full_dispersion;
   std::optional<ResidualAlignment> base_scatter_feature;  // the base's, when significant (scatter_shape)
   bool base_scatter_done = false;
   std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
@@ -316,7 +321,7 @@ struct Round {
 Round start_round(const Suite& suite, const SuiteModel& model, const Comparison& before,
                   bool heavy_tails, DiagnoseProgress* progress, FitPath path, ResidualCache& cache) {
   Round round{suite, before, heavy_tails, progress, path, cache, split_fitted_names(model.effects),
-              refit(suite, model, progress, path, cache).model, 0.0, 0.0, {}, {}, {}, {}, {}, false, {}};
+              refit(suite, model, progress, path, cache).model, 0.0, 0.0, {}, {}, {}, {}, {}, false, {}, {}, {}, {}};
   const auto& base_residuals = cache.at(round.base);
   round.base_full = log_likelihood(base_residuals);
   round.base_scatter = scatter_log_likelihood(base_residuals);
@@ -767,12 +772,12 @@ std::string across_feature(Round& round, Trial& t) {
   const ResidualAlignment* feature = base_mean_feature(round);
   if (!feature) return {};
   Candidate& c = t.c;
+  // The candidate keeps its kinds' folds for the report; the halves decide here.
   std::vector<Candidate::FoldGain> by_kind = std::move(c.held_out_by_fold);
-  const double kinds = c.delta_held_out;
+  const double kinds_total = c.delta_held_out;
   cross_validate(round, round.across, t);
-  std::swap(by_kind, c.held_out_by_fold);
-  const double halves = std::exchange(c.delta_held_out, kinds);
-  const std::vector<Candidate::FoldGain>& across = by_kind;
+  const std::vector<Candidate::FoldGain> across = std::exchange(c.held_out_by_fold, std::move(by_kind));
+  const double halves = std::exchange(c.delta_held_out, kinds_total);
   const bool contradicted = std::any_of(across.begin(), across.end(), [](const Candidate::FoldGain& g) { return g.contradicts; });
   if (!(halves <= 0) && !contradicted) return {};
   std::string gains;
@@ -806,8 +811,68 @@ std::string joined(const std::vector<std::string>& list) {
   return text;
 }
 
+/// The round's full model: the base with every significant candidate judged on the mean (one
+/// per effect), and the names to fit. A candidate's own model leaves in the scatter whatever
+/// other effect the world has, so with two large effects each would be judged against the
+/// other's misfit and neither adopted (the nested F test's trap in forward selection); the
+/// full model's residual scatter is the one a term is tested against in a multiple regression.
+void plan_full_model(Round& round, const std::vector<Trial>& trials) {
+  round.full = round.base;
+  round.full_names = round.nuisance.systematic;
+  for (const Trial& t : trials) {
+    if (!t.c.significant || !judged_on_mean(t, t.c.model) || reported_by_names(*t.type)) continue;
+    const EffectSpec* spec = find_spec(t.c.model.effects, t.type->effect);
+    if (!spec || find_spec(round.full.effects, t.type->effect)) continue;
+    round.full.effects.push_back(*spec);
+    round.full_names.insert(round.full_names.end(), t.type->fitted.begin(), t.type->fitted.end());
+  }
+}
+
+/// The dispersion of the experiments' means under the round's full model, fitted jointly the
+/// first time it is asked for (no degrees of freedom, dof 0, when the model has as many
+/// parameters as the means have components, or its fit fails).
+const MeanDispersion& full_model_dispersion(Round& round) {
+  if (round.full_dispersion) return *round.full_dispersion;
+  MeanDispersion d;
+  d.dof = 0;
+  if (round.progress) ++round.progress->fits_total;
+  try {
+    round.check_cancel();
+    const FitResult r = fit(round.suite, round.full, round.full_names, Likelihood::full, round.counter(),
+                            round.path, &round.cache);
+    d = mean_dispersion(with_means(round.cache.at(r.model), round.cache.at(round.base)), round.full_names.size());
+  } catch (const Cancelled&) {
+    throw;
+  } catch (const std::exception&) {
+    d.dof = 0;  // a joint fit of mimicking effects may not converge: no full model to judge by
+  }
+  if (round.progress) ++round.progress->fits_done;
+  return *(round.full_dispersion = d);
+}
+
+/// The overdispersed-mean rule: the candidate's gain in the mean stays significant at the
+/// family-wise alpha against the scatter of the experiments' means that its own model leaves,
+/// or failing that, the round's full model (plan_full_model; its dispersion replaces the
+/// candidate's in the report when it is the smaller). When the full model has no degrees of
+/// freedom left, the scatter beside every candidate cannot be estimated: the rule stands aside.
+bool overdispersed(Round& round, Trial& t) {
+  Candidate& c = t.c;
+  if (!std::isfinite(c.mean_p_value_dispersed) || c.mean_p_value_dispersed < round.before.alpha) return false;
+  const MeanDispersion& full = full_model_dispersion(round);
+  if (full.dof <= 0) {
+    c.mean_p_value_dispersed = kNaN;
+    return false;
+  }
+  if (full.phi < c.mean_dispersion) {
+    c.mean_dispersion = full.phi;
+    c.mean_p_value_dispersed = mean_p_value(c.delta_mean_log_likelihood, c.dof, t.type->on_boundary, full);
+  }
+  return !(c.mean_p_value_dispersed < round.before.alpha);
+}
+
 /// Rules 1-2 of judge, on the candidate's in-sample fit; false when one stops it.
-bool passes_in_sample(const Round& round, Candidate& c, double per_candidate) {
+bool passes_in_sample(Round& round, Trial& t, double per_candidate) {
+  Candidate& c = t.c;
   if (!c.at_bound.empty()) {
     return stop(c, "stopped", "parameter at bound",
                 "not adopted: its fit ends at the edge of the allowed range (" + joined(c.at_bound) +
@@ -827,7 +892,7 @@ bool passes_in_sample(const Round& round, Candidate& c, double per_candidate) {
                     format_number(c.mean_p_value, "%.2g") +
                     "); its gain comes from the covariance it inflates, not from the mean it should explain");
   }
-  if (std::isfinite(c.mean_p_value_dispersed) && !(c.mean_p_value_dispersed < round.before.alpha)) {
+  if (overdispersed(round, t)) {
     return stop(c, "stopped", "overdispersed mean",
                 "not adopted: its predicted means gain " + format_number(c.delta_mean_log_likelihood, "%.3g") +
                     " in log-likelihood (p = " + format_number(c.mean_p_value, "%.2g") +
@@ -867,8 +932,10 @@ bool passes_held_out(Round& round, Trial& t) {
 /// The rules every adoption must pass, in order; true when the candidate is adopted.
 ///  1. no fitted parameter at a bound of its range (not its neutral value);
 ///  2. a systematic candidate gains in the mean, not only by inflating the covariance: the
-///     gain of its means under the base's covariances is significant at the per-candidate level,
-///     against the scatter of the experiments' means the base leaves (mean_dispersion);
+///     gain of its means under the base's covariances is significant at the per-candidate
+///     level, and stays significant at the family-wise level against the scatter of the
+///     experiments' means that its model, or the round's full model, still leaves
+///     (mean_dispersion, overdispersed);
 ///  3. it predicts the held-out folds better than the base (else it is a mimic), and a
 ///     candidate judged on the mean also predicts across the base's mean feature
 ///     (across_feature);
@@ -877,7 +944,7 @@ bool passes_held_out(Round& round, Trial& t) {
 ///  6. its adopted model does not move the NEES mean away from 3 (moves_nees_away).
 bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& before, std::size_t runs) {
   Candidate& c = t.c;
-  if (!passes_in_sample(round, c, per_candidate) || !passes_held_out(round, t)) return false;
+  if (!passes_in_sample(round, t, per_candidate) || !passes_held_out(round, t)) return false;
   const std::vector<std::string> bounds = adoption_refit(round, t);
   if (!bounds.empty()) {
     return stop(c, "stopped", "parameter at bound",
@@ -1035,52 +1102,6 @@ std::vector<Trial> fit_trials(Round& round, const std::vector<CandidateType>& ty
   return trials;
 }
 
-/// The overdispersion of the mean against the fullest model of the round: the base with every
-/// significant candidate judged on the mean fitted jointly. A candidate's own model leaves in
-/// the scatter whatever other effect the world has, so with two large effects each would be
-/// judged against the other's misfit and neither adopted (the nested F test's classic trap
-/// in forward selection); the full model's residual scatter is the one a term is tested against
-/// in a multiple regression. Each such candidate is judged against the smaller of its own
-/// model's dispersion and the full model's. When the full model leaves no degrees of freedom
-/// (as many parameters as the experiments' means have components) or its fit fails, the scatter
-/// beside every candidate cannot be estimated, and no candidate is judged by it.
-void judge_against_the_full_model(Round& round, std::vector<Trial>& trials) {
-  SuiteModel full = round.base;
-  std::vector<std::string> names = round.nuisance.systematic;
-  std::size_t joined = 0;
-  for (const Trial& t : trials) {
-    if (!t.c.significant || !judged_on_mean(t, t.c.model) || reported_by_names(*t.type)) continue;
-    const EffectSpec* spec = find_spec(t.c.model.effects, t.type->effect);
-    if (!spec || find_spec(full.effects, t.type->effect)) continue;
-    full.effects.push_back(*spec);
-    names.insert(names.end(), t.type->fitted.begin(), t.type->fitted.end());
-    ++joined;
-  }
-  if (joined < 2) return;
-  MeanDispersion d;
-  if (round.progress) ++round.progress->fits_total;
-  try {
-    round.check_cancel();
-    const FitResult r = fit(round.suite, full, names, Likelihood::full, round.counter(), round.path, &round.cache);
-    d = mean_dispersion(with_means(round.cache.at(r.model), round.cache.at(round.base)), names.size());
-    if (round.progress) ++round.progress->fits_done;
-  } catch (const Cancelled&) {
-    throw;
-  } catch (const std::exception&) {
-    d.dof = 0;
-  }
-  if (d.dof <= 0) {
-    for (Trial& t : trials) t.c.mean_p_value_dispersed = kNaN;
-    return;
-  }
-  for (Trial& t : trials) {
-    Candidate& c = t.c;
-    if (!std::isfinite(c.mean_dispersion) || !(d.phi < c.mean_dispersion)) continue;
-    c.mean_dispersion = d.phi;
-    c.mean_p_value_dispersed = mean_p_value(c.delta_mean_log_likelihood, c.dof, t.type->on_boundary, d);
-  }
-}
-
 }  // namespace
 
 double contradiction_bound(double stderr_ratio, int dof) {
@@ -1134,7 +1155,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   // finalists' folds).
   if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
   std::vector<Trial> trials = fit_trials(round, types, d.runs, options.alpha);
-  judge_against_the_full_model(round, trials);
+  plan_full_model(round, trials);
   const double per_candidate = options.alpha / static_cast<double>(std::max<std::size_t>(1, trials.size()));
   for (std::size_t i = 0; i < trials.size() && trials[i].c.significant && !d.best; ++i) {
     if (judge(round, trials[i], per_candidate, d.before, d.runs)) d.best = i;
