@@ -316,6 +316,16 @@ void add_features(PathFeatures& sum, const PathFeatures& f, double n) {
   sum.heading_known = sum.heading_known && f.heading_known;
 }
 
+/// An experiment's path features: the mean of its runs' (heading_known only when every run's
+/// start heading is).
+PathFeatures experiment_path_features(const SuiteExperiment& ex, double wheelbase_m) {
+  PathFeatures sum;
+  sum.heading_known = true;  // until a run without its start heading
+  const double n = static_cast<double>(ex.runs.size());
+  for (const SuiteRun& run : ex.runs) add_features(sum, path_features(ex, run, wheelbase_m), n);
+  return sum;
+}
+
 /// The scatter part of an experiment (see residual_alignment): W_e = sum d_i' Sigma_i^-1 d_i
 /// with d_i the end-frame residuals about their own mean, over its expectation under the model;
 /// shape 0 (no scatter part) for a lone run or a covariance that cannot be inverted.
@@ -347,8 +357,6 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
                      const std::vector<Residuals>& nudges, double B, ExperimentMean& m) {
   const double n = static_cast<double>(ex.runs.size());
   Matrix3 C = Matrix3::Zero();
-  PathFeatures sum;
-  sum.heading_known = true;  // until a run without its start heading
   std::vector<Vector3> runs;
   std::vector<Matrix3> covs;
   for (std::size_t r = 0; r < ex.runs.size(); ++r) {
@@ -362,12 +370,11 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
       m.S.col(j) += R * (nudges[static_cast<std::size_t>(j)][e][r].mean - res.mean) / (kSensitivityStep * n);
     }
     C += covs.back() / (n * n);
-    add_features(sum, path_features(ex, ex.runs[r], B), n);
   }
   const Eigen::LDLT<Matrix3> ldlt(C);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
   m.W = ldlt.solve(Matrix3::Identity());
-  m.features = sum;
+  m.features = experiment_path_features(ex, B);
   m.group = experiment_group(ex);
   m.experiment = e;
   experiment_scatter(runs, covs, m);
@@ -633,14 +640,10 @@ std::vector<double> experiment_feature_values(const Suite& suite, double wheelba
                               [&](const Feature& x) { return feature == x.name && x.columns > 0; });
   std::vector<double> out(suite.experiments.size(), std::numeric_limits<double>::quiet_NaN());
   if (f == features().end()) return out;
-  std::vector<PathFeatures> means(suite.experiments.size());
-  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
-    const SuiteExperiment& ex = suite.experiments[e];
-    means[e].heading_known = true;
-    for (const SuiteRun& run : ex.runs) {
-      add_features(means[e], path_features(ex, run, wheelbase_m), static_cast<double>(ex.runs.size()));
-    }
-    if (f->needs_heading && !ex.runs.empty() && !means[e].heading_known) return out;
+  std::vector<PathFeatures> means;
+  for (const SuiteExperiment& ex : suite.experiments) {
+    means.push_back(experiment_path_features(ex, wheelbase_m));
+    if (f->needs_heading && !ex.runs.empty() && !means.back().heading_known) return out;
   }
   // The column that varies more (the heading's cos or sin).
   int column = 0;
