@@ -114,6 +114,38 @@ TEST(CrossValidation, HeldOutLikelihoodOfIndependentRunsIsTheirOwnDensity) {
   }
 }
 
+TEST(CrossValidation, TheCacheKeepsVerdictsAndForgetsWhatARoundDidNotRead) {
+  // calibrate shares one cache over its rounds: a verdict read twice is the referee's once, and
+  // is the verdict a new compare gives (the referee is seeded); what a round did not read is
+  // forgotten at the next round's start.
+  const Suite lab = test::synth_suite(load_world(kStandard), "cache_age");
+  const SuiteModel model = suite_model(lab);
+  SuiteModel other = model;
+  other.effects.push_back({"scale_error", {1.001}});
+  CalibrationOptions referee;
+  referee.method = CalibrationMethod::simulation;
+  referee.max_replicates = 99;
+  ResidualCache cache(lab);
+  const Comparison& kept = cache.comparison(model, 0.01, referee);
+  EXPECT_EQ(&cache.comparison(model, 0.01, referee), &kept);
+  const Comparison fresh = compare(lab, model, 0.01, referee);
+  EXPECT_EQ(kept.calibration.replicates, fresh.calibration.replicates);
+  EXPECT_EQ(kept.calibration.p_value, fresh.calibration.p_value);
+  EXPECT_EQ(kept.log_likelihood, fresh.log_likelihood);
+  // Other options are another verdict.
+  EXPECT_NE(&cache.comparison(model, 0.05, referee), &kept);
+  cache.at(other);
+  const std::int64_t computed = cache.computed();
+  cache.age();  // a round starts: everything above was read in the last one, and is kept
+  cache.at(model);
+  EXPECT_EQ(cache.computed(), computed);
+  cache.age();  // `other` was not read since: it goes, `model` stays
+  cache.at(model);
+  EXPECT_EQ(cache.computed(), computed);
+  cache.at(other);
+  EXPECT_EQ(cache.computed(), computed + 1);
+}
+
 /// A scale that fades with time, 1 + a exp(-t/tau): strongly nonlinear in tau.
 EffectSpec warmup(double a, double tau) {
   CustomEffect def;

@@ -15,11 +15,12 @@ namespace {
 /// The diagnose rounds: each adopts at most one candidate; the loop stops when one adopts
 /// nothing or after `rounds`.
 void run_rounds(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
-                DiagnoseProgress* progress, CalibrateResult& out) {
+                DiagnoseProgress* progress, ResidualCache& cache, CalibrateResult& out) {
   SuiteModel model = start;
   for (int round = 0; round < options.rounds; ++round) {
     if (progress) progress->round = round + 1;
-    out.rounds.push_back(diagnose(suite, model, options.diagnose, progress));
+    cache.age();
+    out.rounds.push_back(diagnose(suite, model, options.diagnose, progress, cache));
     const Diagnosis& d = out.rounds.back();
     if (!d.best) break;
     out.named.push_back(d.candidates[*d.best].effect);
@@ -148,11 +149,11 @@ FitResult design_point(CalibrateResult& out) {
 
 /// The final model's account: compare, residuals, corrected odometry, what the runs cannot
 /// separate and what to record next.
-void account(const Suite& suite, const CalibrateOptions& options, CalibrateResult& out) {
-  const Comparison c = compare(suite, out.model, options.diagnose.alpha, options.diagnose.calibration);
+void account(const Suite& suite, const CalibrateOptions& options, ResidualCache& cache, CalibrateResult& out) {
+  const Comparison& c = cache.comparison(out.model, options.diagnose.alpha, options.diagnose.calibration);
   out.after = summarise(c);
   out.explained = c.verdict.consistent();
-  if (!out.explained) out.residuals = residual_alignment(suite, out.model, residuals(suite, out.model));
+  if (!out.explained) out.residuals = residual_alignment(suite, out.model, cache.at(out.model));
   out.odometry_correction = odometry_correction(suite, out.model);
   FitResult at = design_point(out);
   if (at.names.empty()) return;
@@ -245,12 +246,15 @@ HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, doub
 CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
                       const Suite* holdout, DiagnoseProgress* progress) {
   CalibrateResult out;
-  run_rounds(suite, start, options, progress, out);
+  // Every exact propagation and verdict, kept for the whole loop: each round's base refit
+  // starts where the previous round's winner ended, and the nested checks' fits, the joint fit
+  // and the final account start from the loop's model.
+  ResidualCache cache(suite);
+  run_rounds(suite, start, options, progress, cache, out);
   if (progress && progress->cancel.load()) throw Cancelled();
-  ResidualCache cache(suite);  // the nested checks' fits and the joint fit start from one model
   simplify_nested(suite, options, progress, cache, out);
   joint_fit(suite, options, progress, cache, out);
-  account(suite, options, out);
+  account(suite, options, cache, out);
   out.model.domain = training_domain(suite, out.model.robot.wheelbase_m);
   out.diff_drive = diff_drive_parameters(suite, out.model);
   if (holdout) {

@@ -597,12 +597,38 @@ std::string model_key(const SuiteModel& m) {
 /// What a cache and its views share: the suite and every model's residuals, each propagated
 /// once.
 struct ResidualCache::Store {
+  template <class T>
+  struct Entry {
+    T value;
+    std::int64_t used;  // the generation that last read it
+  };
+  /// The entry of `key` in `map`, computed by `make` when absent; marked as used now.
+  template <class T, class Make>
+  const T& get(std::map<std::string, Entry<T>>& map, const std::string& key, Make make) {
+    auto it = map.find(key);
+    if (it == map.end()) it = map.emplace(key, Entry<T>{make(), generation}).first;
+    it->second.used = generation;
+    return it->second.value;
+  }
   const Suite* suite;
-  std::map<std::string, Residuals> by_model;
+  std::map<std::string, Entry<Residuals>> by_model;
+  std::map<std::string, Entry<Comparison>> comparisons;  // by model, alpha and the referee's options
   std::int64_t computed = 0;
+  std::int64_t generation = 0;
 };
 
-ResidualCache::ResidualCache(const Suite& suite) : store_(std::make_shared<Store>(Store{&suite, {}, 0})) {}
+ResidualCache::ResidualCache(const Suite& suite) : store_(std::make_shared<Store>(Store{&suite, {}, {}, 0, 0})) {}
+
+void ResidualCache::age() {
+  auto drop_unused = [this](auto& map) {
+    for (auto it = map.begin(); it != map.end();) {
+      it = it->second.used < store_->generation ? map.erase(it) : std::next(it);
+    }
+  };
+  drop_unused(store_->by_model);
+  drop_unused(store_->comparisons);
+  ++store_->generation;
+}
 
 ResidualCache::ResidualCache(ResidualCache& parent, std::vector<bool> keep)
     : store_(parent.store_), keep_(std::move(keep)) {
@@ -623,12 +649,11 @@ std::vector<std::vector<RunResidual>> ResidualCache::evaluate(const SuiteModel& 
 
 const std::vector<std::vector<RunResidual>>& ResidualCache::full(const SuiteModel& model,
                                                                  std::atomic<std::int64_t>* counter) {
-  const std::string key = model_key(model);
-  auto it = store_->by_model.find(key);
-  if (it != store_->by_model.end()) return it->second;
-  if (counter) ++*counter;
-  ++store_->computed;
-  return store_->by_model.emplace(key, residuals(*store_->suite, model)).first->second;
+  return store_->get(store_->by_model, model_key(model), [&] {
+    if (counter) ++*counter;
+    ++store_->computed;
+    return residuals(*store_->suite, model);
+  });
 }
 
 const std::vector<std::vector<RunResidual>>& ResidualCache::at(const SuiteModel& model,
@@ -638,6 +663,17 @@ const std::vector<std::vector<RunResidual>>& ResidualCache::at(const SuiteModel&
   auto it = subsets_.find(key);
   if (it != subsets_.end()) return it->second;
   return subsets_.emplace(key, select_experiments(full(model, counter), keep_)).first->second;
+}
+
+const Comparison& ResidualCache::comparison(const SuiteModel& model, double alpha,
+                                             const CalibrationOptions& options) {
+  std::string key = model_key(model);
+  auto put = [&key](auto x) { key.append(reinterpret_cast<const char*>(&x), sizeof x); };
+  put(alpha);
+  put(options.method);
+  put(options.max_replicates);
+  put(options.seed);
+  return store_->get(store_->comparisons, key, [&] { return compare(*store_->suite, model, alpha, full(model), options); });
 }
 
 std::vector<std::vector<RunResidual>> select_experiments(

@@ -1021,7 +1021,7 @@ std::size_t prefer_nested_simpler(Round& round, std::vector<Trial>& trials, std:
 }
 
 bool consistent_model(const Round& round, const SuiteModel& model, const CalibrationOptions& calibration) {
-  return compare(round.suite, model, round.before.alpha, round.cache.at(model), calibration).verdict.consistent();
+  return round.cache.comparison(model, round.before.alpha, calibration).verdict.consistent();
 }
 
 /// The consistency rule. The likelihood that ranks the candidates is Gaussian and blind to the
@@ -1060,9 +1060,7 @@ std::size_t prefer_consistent_rival(Round& round, std::vector<Trial>& trials, st
 /// corrected odometry and, when it still misfits, what the misfit lines up with.
 void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, ResidualCache& cache,
                      const CalibrationOptions& calibration) {
-  d.after = d.best ? summarise(compare(suite, d.candidates[*d.best].model, d.alpha,
-                                       cache.at(d.candidates[*d.best].model), calibration))
-                   : d.before;
+  d.after = d.best ? summarise(cache.comparison(d.candidates[*d.best].model, d.alpha, calibration)) : d.before;
   d.explained = d.after.verdict == "consistent";
   d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
   if (!d.explained) {
@@ -1131,14 +1129,18 @@ ModelSummary summarise(const Comparison& c) {
 
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOptions& options,
                    DiagnoseProgress* progress) {
-  // Every exact propagation of the round, kept: the fast path's anchors and difference points
-  // around the base model are shared by all candidates, and by their fits on the folds.
   ResidualCache cache(suite);
+  return diagnose(suite, model, options, progress, cache);
+}
+
+Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOptions& options,
+                   DiagnoseProgress* progress, ResidualCache& cache) {
+  if (&cache.suite() != &suite) throw std::invalid_argument("diagnose: the cache is of another suite");
   Diagnosis d;
   d.alpha = options.alpha;
   d.runs = run_count(suite);
   if (options.cross_validate) d.folds = make_folds(suite);
-  const Comparison before = compare(suite, model, options.alpha, cache.at(model), options.calibration);
+  const Comparison& before = cache.comparison(model, options.alpha, options.calibration);
   d.before = summarise(before);
   d.kurtosis = before.kurtosis;
   d.heavy_tails = d.kurtosis.valid && d.kurtosis.statistic > 0 && d.kurtosis.p_value < options.alpha;

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "odomcov/measurement/comparison.hpp"
 #include "odomcov/measurement/likelihood.hpp"
 
 namespace odomcov {
@@ -81,6 +82,14 @@ class ResidualCache {
   /// The residuals of `model` (of the view's experiments) computed now and not kept: for
   /// evaluations that are not used again (an exact optimiser's).
   std::vector<std::vector<RunResidual>> evaluate(const SuiteModel& model);
+  /// compare of `model` against every experiment of the suite, computed on the first request
+  /// with these options and kept: a verdict that several steps read (a round's model after, the
+  /// next round's model before, calibrate's final account) is calibrated by its referee once.
+  /// The referee is seeded (options.seed), so a kept verdict is the one a new compare would give.
+  const Comparison& comparison(const SuiteModel& model, double alpha, const CalibrationOptions& options);
+  /// Forgets what was not read since the previous call (for a cache that outlives a round:
+  /// what the next round can reuse is what this one read, so memory stays that of two rounds).
+  void age();
   /// How many propagations of the whole suite the shared store has run.
   std::int64_t computed() const;
   const Suite& suite() const;

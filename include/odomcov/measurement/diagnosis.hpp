@@ -257,6 +257,12 @@ struct DiagnoseOptions {
 /// model is propagated once.
 Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOptions& options,
                    DiagnoseProgress* progress = nullptr);
+/// The same with `cache` (of `suite`) holding every exact propagation and verdict: the fast
+/// path's anchors and difference points around the base model are shared by all candidates and
+/// by their fits on the folds, and calibrate's rounds share them with each other (a round's
+/// base refit starts where the previous round's winner ended).
+Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOptions& options,
+                   DiagnoseProgress* progress, ResidualCache& cache);
 /// The same with the options one by one (cross-validated).
 /// `calibration` is how the compares of the model before and after calibrate their verdicts
 /// (compare; the referee's seed and replicates).
