@@ -128,8 +128,8 @@ GROUP_RUNS = (4, 8)
 #    at speed); its worlds are driven at SPEEDS; the feature is speed (on the scatter);
 #  heading_drift: a sideways drift that depends on the absolute heading, a cos(heading) per
 #    metre, a = 0.003..0.008 (a slope whose downhill is the world's +y); each run starts at a
-#    random heading (heading0 uniform on [-pi, pi]). Its residual feature, heading, is not among
-#    this branch's features: it is judged on the catalogue alone and with its custom effect.
+#    random heading (heading0 uniform on [-pi, pi]). Its residual feature is heading: the runs of
+#    one experiment end apart along their start headings (the residual features' run part).
 SPEED_SCALE = "speed_scale"
 SPEEDS = (0.15, 0.6)
 V0 = 0.375

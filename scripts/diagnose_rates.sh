@@ -19,7 +19,12 @@
 # the speed-noise worlds of the open batch 28112026 (and, with the dispersion from the model's
 # simulated world, the open batch 29112026 and the OptiOdom circles held out); it changed no
 # world of the mixed batch 27112026. The batches were then rerun with new seeds: mixed 8122026,
-# none 9122027, group 10122026, open 3122026.
+# none 9122027, group 10122026, open 3122026. The overdispersed-mean and across-the-feature rules
+# came from the open batches 3122026 and 28112026 and the mixed batch 27112026; rerun with mixed
+# 15122026, none 16122027, group 17122026, open 18122026. The run-by-run rule came from the
+# heading-drift worlds of the open batch 18122026 (checked on 3122026 and 28112026 too); it
+# applies only where the runs of an experiment start at different headings, which no world of the
+# mixed, none and group batches has, so only the open batch was rerun, with the new seed 19122026.
 #   scripts/diagnose_rates.sh            # the four batches
 #   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, or pilot (16 worlds)
 set -euo pipefail
@@ -41,6 +46,6 @@ run() {  # name seed worlds cases
 if want mixed; then run mixed 15122026 112 mixed; fi
 if want none; then run none 16122027 200 none; fi
 if want group; then run group 17122026 60 group; fi
-if want open; then run open 18122026 28 open; fi
+if want open; then run open 19122026 28 open; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2

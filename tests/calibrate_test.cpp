@@ -262,6 +262,41 @@ TEST(Diagnose, ASystematicCandidateThatOnlyInflatesTheCovarianceIsStopped) {
   EXPECT_TRUE(!d.best || d.candidates[*d.best].effect != "line_wheelbase");
 }
 
+TEST(Diagnose, ANoiseIsNotAdoptedForAScatterThatFollowsTheStartHeading) {
+  // A floor that slopes: a sideways slip of a cos(heading) per metre, in no catalogue, and each
+  // run starts at its own heading, so the runs of one experiment end apart, and more than the
+  // model predicts. Random candidates widen the prediction to take that spread up (before the
+  // run-by-run rule bumps were adopted in such blind worlds); but the runs' errors about their
+  // experiment's mean follow their heading, so the spread is systematic: each random candidate
+  // that gets that far is stopped by the rule, nothing is adopted, and the heading, run by run,
+  // is what the misfit lines up with first.
+  WorldFile w = standard_world({}, 1812);
+  CustomEffect slope;
+  slope.name = "slope";
+  slope.parameters = {"a"};
+  slope.lateral.text = "a * cos(heading)";
+  w.world.effects = {define_custom_effect(slope, {0.006})};
+  for (WorldExperiment& ex : w.experiments) {
+    ex.heading0.given = true;
+    ex.heading0.lo = -3.14159;
+    ex.heading0.hi = 3.14159;
+  }
+  const Suite lab = test::synth_suite(w, "run_by_run");
+  const Diagnosis d = diagnose(lab, suite_model(lab));
+  EXPECT_FALSE(d.best) << d.candidates[*d.best].effect;
+  int stopped = 0;
+  for (const Candidate& c : d.candidates) {
+    if (c.rule != "run by run") continue;
+    EXPECT_FALSE(c.systematic) << c.effect;
+    ++stopped;
+  }
+  EXPECT_GE(stopped, 1);
+  ASSERT_FALSE(d.residuals.empty());
+  EXPECT_EQ(d.residuals.front().feature, "heading");
+  EXPECT_EQ(d.residuals.front().part, "run");
+  EXPECT_LT(d.residuals.front().p_value, kDiagnoseAlpha);
+}
+
 TEST(Diagnose, ACandidateAtABoundOrConfoundedIsStopped) {
   // The standard lab's lines and spins only (standard.yaml's seed): turn_dependent_wheelbase's
   // arc part is not determined (no arc), and its fit runs to the edge of its range.

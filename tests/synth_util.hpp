@@ -15,7 +15,7 @@ namespace odomcov::test {
 inline Suite synth_suite(const WorldFile& w, const std::string& tag) {
   const auto dir = scratch_dir("odomcov_synth_" + tag);
   for (std::size_t i = 0; i < w.experiments.size(); ++i) {
-    std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
+    std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i), start_headings(w, i));
   }
   std::ofstream(dir / "suite.yaml") << suite_yaml(w);
   return load_suite((dir / "suite.yaml").string());

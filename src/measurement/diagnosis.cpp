@@ -307,6 +307,8 @@ struct Round {
   std::optional<ResidualAlignment> base_scatter_feature;  // the base's, when significant (scatter_shape)
   bool base_scatter_done = false;
   std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
+  std::optional<ResidualAlignment> base_run_feature;  // the base's, when significant (run_by_run)
+  bool base_run_done = false;
 
   std::atomic<std::int64_t>* counter() const { return progress ? &progress->evaluations : nullptr; }
   /// Throws Cancelled when the caller asked to stop.
@@ -737,6 +739,47 @@ std::string scatter_shape(Round& round, const Trial& t) {
   return {};
 }
 
+/// A model's run part (residual_alignment): the features its runs' errors about their
+/// experiment's mean follow, run by run, each with its family-wise p-value, best first; none
+/// unless some experiment's runs started at different headings.
+std::vector<ResidualAlignment> run_features(const Round& round, const SuiteModel& model) {
+  std::vector<ResidualAlignment> out;
+  if (!runs_start_at_different_headings(round.suite)) return out;
+  for (ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model))) {
+    if (a.part == "run" && a.testable) out.push_back(std::move(a));
+  }
+  return out;
+}
+
+/// The run-by-run rule. A random candidate says that the runs scatter more than the model
+/// predicts, by chance. When the runs of an experiment started at different headings and their
+/// errors about the experiment's mean follow the heading (the run part of residual_alignment,
+/// significant at the family-wise alpha), that spread is systematic: the heading predicts it
+/// run by run, and a random effect that widens the prediction only imitates it (bumps took up a
+/// sideways drift down a sloping floor in blind worlds whose runs start at random headings).
+/// The test estimates its scale from the data, so a wider prediction does not weaken it: the
+/// candidate is stopped when the run part stays significant with it. Returns the decision's
+/// words when it stops the candidate.
+std::string run_by_run(Round& round, const Trial& t) {
+  const double alpha = round.before.alpha;
+  if (!round.base_run_done) {
+    const std::vector<ResidualAlignment> base = run_features(round, round.base);
+    if (!base.empty() && base.front().p_value < alpha) round.base_run_feature = base.front();
+    round.base_run_done = true;
+  }
+  if (!round.base_run_feature) return {};
+  const ResidualAlignment& before = *round.base_run_feature;
+  for (const ResidualAlignment& a : run_features(round, t.c.model)) {
+    if (a.feature != before.feature) continue;
+    if (!(a.p_value < alpha)) return {};
+    return "not adopted: the runs of an experiment differ from each other along their " + before.feature +
+           " (p = " + format_number(before.p_value, "%.2g") + "), and with " + t.c.effect +
+           " they still do (p = " + format_number(a.p_value, "%.2g") +
+           "): the spread it widens the prediction for is systematic, not random: " + before.description;
+  }
+  return {};
+}
+
 /// The feature of the path the base's mean misfit lines up with most (residual_alignment; not
 /// the group), when it is significant at the family-wise alpha, and the halves of the
 /// experiments along it (feature_folds); computed once per round.
@@ -940,7 +983,9 @@ bool passes_held_out(Round& round, Trial& t) {
 ///     candidate judged on the mean also predicts across the base's mean feature
 ///     (across_feature);
 ///  4. its adopted model (everything refitted) has no parameter at a bound;
-///  5. a random candidate explains the shape of the scatter it is judged on (scatter_shape);
+///  5. a random candidate explains the spread it is judged on: the runs' errors about their
+///     experiment's mean do not follow their start heading (run_by_run), and the scatter's
+///     shape along the path is the candidate's (scatter_shape);
 ///  6. its adopted model does not move the NEES mean away from 3 (moves_nees_away).
 bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& before, std::size_t runs) {
   Candidate& c = t.c;
@@ -951,6 +996,8 @@ bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& bef
                 "not adopted: with every effect refitted, " + joined(bounds) + " ends at the edge of its range");
   }
   if (judged_on_scatter(t, c.model)) {
+    const std::string runs = run_by_run(round, t);
+    if (!runs.empty()) return stop(c, "stopped", "run by run", runs);
     const std::string shape = scatter_shape(round, t);
     if (!shape.empty()) return stop(c, "stopped", "scatter shape", shape);
   }

@@ -135,8 +135,10 @@ class FeatureAccumulator {
 
 /// A residual feature: its value(s) for a run (two columns for the heading's direction), and
 /// what a misfit along it points at, in the mean and in the scatter. `columns` 0: the groups'
-/// one-way ANOVA. `needs_heading`: testable only when every run's start heading is known. The
-/// one table every list of features comes from.
+/// one-way ANOVA. `needs_heading`: testable only when every run's start heading is known.
+/// `run`: what a misfit along it run by run points at, for a feature in which the runs of one
+/// experiment differ by design (their start headings; run_feature_test); null for the others.
+/// The one table every list of features comes from.
 struct Feature {
   const char* name;
   int columns;
@@ -144,6 +146,7 @@ struct Feature {
   const char* mean;
   const char* scatter;
   bool needs_heading = false;
+  const char* run = nullptr;
 };
 
 const std::vector<Feature>& features() {
@@ -208,7 +211,12 @@ const std::vector<Feature>& features() {
        "a spread that depends on the direction the robot drives in the room: slip that is more "
        "random uphill than downhill, or across a carpet's grain than along it; a custom noise: "
        "\"exp(a*cos(heading) + b*sin(heading))\" would model it",
-       true},
+       true,
+       "runs of one experiment that started at different headings end with errors that follow "
+       "their heading: the spread between them is systematic, not noise, an error that depends on "
+       "the direction the robot drives in the room (a floor that slopes, a carpet's grain); not "
+       "in the catalogue: a custom effect such as lateral: \"a*cos(heading) + b*sin(heading)\" "
+       "(sideways slip per metre) would model it"},
       {"group", 0, nullptr,
        "an error that differs between groups (sessions, days, floors) more than the model "
        "allows: a parameter that changes from group to group, e.g. tyre pressure or floor "
@@ -232,6 +240,9 @@ struct ExperimentMean {
   double dispersion = 0.0;  // phi_e = shape * Var(s_e) in the model's simulated world; 0: unknown
   std::size_t experiment = 0;  // its index in the suite
   std::vector<Matrix3> frames, covs;  // each run's end frame and its covariance in it
+  std::vector<Vector3> runs;          // each run's residual in its end frame
+  std::vector<PathFeatures> run_features;
+  bool headings_differ = false;  // its runs' start headings are known and not all the same
 };
 
 /// RSS of the GLS fit of r_e = X_e b over the experiments.
@@ -316,14 +327,33 @@ void add_features(PathFeatures& sum, const PathFeatures& f, double n) {
   sum.heading_known = sum.heading_known && f.heading_known;
 }
 
+/// Each run's path features.
+std::vector<PathFeatures> run_path_features(const SuiteExperiment& ex, double wheelbase_m) {
+  std::vector<PathFeatures> out;
+  for (const SuiteRun& run : ex.runs) out.push_back(path_features(ex, run, wheelbase_m));
+  return out;
+}
+
 /// An experiment's path features: the mean of its runs' (heading_known only when every run's
 /// start heading is).
-PathFeatures experiment_path_features(const SuiteExperiment& ex, double wheelbase_m) {
+PathFeatures mean_path_features(const std::vector<PathFeatures>& runs) {
   PathFeatures sum;
   sum.heading_known = true;  // until a run without its start heading
-  const double n = static_cast<double>(ex.runs.size());
-  for (const SuiteRun& run : ex.runs) add_features(sum, path_features(ex, run, wheelbase_m), n);
+  const double n = static_cast<double>(runs.size());
+  for (const PathFeatures& f : runs) add_features(sum, f, n);
   return sum;
+}
+
+/// True when the runs of `ex` give their start headings and these are not all the same: the
+/// experiments the run part of a feature (run_feature_test) can use.
+bool headings_differ(const SuiteExperiment& ex) {
+  if (ex.runs.size() < 2) return false;
+  bool differ = false;
+  for (const SuiteRun& run : ex.runs) {
+    if (!run.heading0_given) return false;
+    differ = differ || run.heading0_rad != ex.runs.front().heading0_rad;
+  }
+  return differ;
 }
 
 /// The scatter part of an experiment (see residual_alignment): W_e = sum d_i' Sigma_i^-1 d_i
@@ -374,11 +404,14 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
   const Eigen::LDLT<Matrix3> ldlt(C);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
   m.W = ldlt.solve(Matrix3::Identity());
-  m.features = experiment_path_features(ex, B);
+  m.run_features = run_path_features(ex, B);
+  m.features = mean_path_features(m.run_features);
   m.group = experiment_group(ex);
   m.experiment = e;
+  m.headings_differ = headings_differ(ex);
   experiment_scatter(runs, covs, m);
   m.covs = std::move(covs);
+  m.runs = std::move(runs);
   return true;
 }
 
@@ -440,6 +473,88 @@ void mean_feature_test(const std::vector<ExperimentMean>& ms, const std::vector<
     X1.push_back(x);
   }
   f_test(ms, X0, X1, a);
+}
+
+/// A feature's columns over an experiment's runs about their mean, those that vary scaled to at
+/// most 1 in absolute value.
+std::vector<Eigen::VectorXd> run_columns(const ExperimentMean& m, const Feature& f) {
+  const auto n = static_cast<Eigen::Index>(m.runs.size());
+  std::vector<Eigen::VectorXd> cols;
+  for (int c = 0; c < f.columns; ++c) {
+    Eigen::VectorXd v(n);
+    for (Eigen::Index i = 0; i < n; ++i) v(i) = f.value(m.run_features[static_cast<std::size_t>(i)], c);
+    v.array() -= v.mean();
+    const double widest = v.cwiseAbs().maxCoeff();
+    if (widest > 1e-9 && std::isfinite(widest)) cols.push_back(v / widest);
+  }
+  return cols;
+}
+
+/// One experiment's share of the run part: its runs' weighted sum of squares about their mean
+/// (RSS0), the part of it its own coefficients on the feature's columns explain, and their
+/// number; not ok when a run's covariance cannot be inverted.
+struct RunShare {
+  double rss0 = 0.0, explained = 0.0;
+  int parameters = 0;
+  bool ok = true;
+};
+
+RunShare run_share(const ExperimentMean& m, const Feature& f) {
+  const std::vector<Eigen::VectorXd> cols = run_columns(m, f);
+  const auto n = static_cast<Eigen::Index>(m.runs.size());
+  const auto p = static_cast<Eigen::Index>(kDim * cols.size());
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p, p), X(kDim, p);
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(p);
+  Vector3 mean = Vector3::Zero();
+  for (const Vector3& r : m.runs) mean += r / static_cast<double>(n);
+  RunShare out;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::LDLT<Matrix3> ldlt(m.covs[static_cast<std::size_t>(i)]);
+    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return {0.0, 0.0, 0, false};
+    const Matrix3 W = ldlt.solve(Matrix3::Identity());
+    const Vector3 d = m.runs[static_cast<std::size_t>(i)] - mean;
+    out.rss0 += d.dot(W * d);
+    for (std::size_t c = 0; c < cols.size(); ++c) {
+      X.middleCols(static_cast<Eigen::Index>(kDim * c), kDim) = cols[c](i) * Matrix3::Identity();
+    }
+    A += X.transpose() * W * X;
+    b += X.transpose() * W * d;
+  }
+  const Eigen::LDLT<Eigen::MatrixXd> fit(A);
+  if (p == 0 || fit.info() != Eigen::Success || !(fit.vectorD().minCoeff() > 0)) return out;  // its columns add nothing
+  out.explained = b.dot(fit.solve(b));
+  out.parameters = static_cast<int>(p);
+  return out;
+}
+
+/// Run part of a feature in which the runs of one experiment differ by design (Feature::run):
+/// over the experiments whose runs started at different headings, each run's end-frame residual
+/// about its experiment's mean, d_i, against the feature's columns about theirs, g_i, in
+/// weighted least squares (Sigma_i^-1), with each experiment's own coefficients:
+///   H1: d_i = sum_c g_ic a_ec (a_ec in R^3)   against   H0: d_i = 0.
+/// The runs of an experiment drive one path turned by their start headings psi0, so an error
+/// that depends on the heading linearly in its cos and sin is linear in (cos psi0, sin psi0)
+/// there, and so is the path's mean heading (the columns); how it scales from one path to
+/// another (with the distance, the turns) is the experiment's own. F = ((RSS0 - RSS1)/q) /
+/// (RSS1/(nu - q)) ~ F(q, nu - q), q = 3 x the columns that vary, summed over the experiments,
+/// nu = 3 sum_e (n_e - 1): the within-experiment analysis of variance, its scale estimated from
+/// RSS1, so a spread predicted too small or too large does not count, only one that follows the
+/// feature. Untestable when no experiment qualifies or nothing varies.
+void run_feature_test(const std::vector<ExperimentMean>& ms, const Feature& f, ResidualAlignment& a) {
+  double rss0 = 0.0, explained = 0.0;
+  int q = 0, nu = 0;
+  for (const ExperimentMean& m : ms) {
+    if (!m.headings_differ) continue;
+    const RunShare share = run_share(m, f);
+    if (!share.ok) return;
+    rss0 += share.rss0;
+    explained += share.explained;
+    q += share.parameters;
+    nu += kDim * static_cast<int>(m.runs.size() - 1);
+  }
+  const double rss1 = rss0 - explained;
+  if (q == 0 || nu - q <= 0 || !(rss1 > 0) || !std::isfinite(rss0)) return;
+  f_result(std::max(0.0, explained / q) / (rss1 / (nu - q)), q, nu - q, a);
 }
 
 /// The groups of the experiments, indexed in order of first appearance.
@@ -635,6 +750,10 @@ PathFeatures path_features(const SuiteExperiment& ex, const SuiteRun& run, doubl
 
 std::string experiment_group(const SuiteExperiment& ex) { return group_key(ex); }
 
+bool runs_start_at_different_headings(const Suite& suite) {
+  return std::any_of(suite.experiments.begin(), suite.experiments.end(), headings_differ);
+}
+
 std::vector<double> experiment_feature_values(const Suite& suite, double wheelbase_m, const std::string& feature) {
   const auto f = std::find_if(features().begin(), features().end(),
                               [&](const Feature& x) { return feature == x.name && x.columns > 0; });
@@ -642,7 +761,7 @@ std::vector<double> experiment_feature_values(const Suite& suite, double wheelba
   if (f == features().end()) return out;
   std::vector<PathFeatures> means;
   for (const SuiteExperiment& ex : suite.experiments) {
-    means.push_back(experiment_path_features(ex, wheelbase_m));
+    means.push_back(mean_path_features(run_path_features(ex, wheelbase_m)));
     if (f->needs_heading && !ex.runs.empty() && !means.back().heading_known) return out;
   }
   // The column that varies more (the heading's cos or sin).
@@ -686,8 +805,17 @@ std::vector<ResidualAlignment> residual_alignment(
     x << Matrix3::Identity(), m.S;
     X0.push_back(x);
   }
+  const bool run_part = std::any_of(ms.begin(), ms.end(), [](const ExperimentMean& m) { return m.headings_differ; });
   std::vector<ResidualAlignment> out;
   for (const Feature& f : features()) {
+    if (f.run && run_part) {
+      ResidualAlignment run;
+      run.feature = f.name;
+      run.part = "run";
+      run.description = f.run;
+      run_feature_test(ms, f, run);
+      out.push_back(std::move(run));
+    }
     ResidualAlignment mean, scatter;
     mean.feature = scatter.feature = f.name;
     mean.part = "mean";

@@ -57,13 +57,20 @@ std::vector<double> experiment_feature_values(const Suite& suite, double wheelba
 /// (group_key: an experiment without one is a group of its own).
 std::string experiment_group(const SuiteExperiment& ex);
 
+/// True when some experiment's runs give their start headings and these differ: the suites whose
+/// residual alignment has a run part (heading).
+bool runs_start_at_different_headings(const Suite& suite);
+
 /// The residual features, in the order of docs/json.md's list (each tested against both parts).
 const std::vector<std::string>& residual_feature_names();
 
 /// One test of a feature against one part of the misfit.
 struct ResidualAlignment {
   std::string feature;
-  std::string part = "mean";  // "mean" (the experiments' mean residuals) or "scatter" (their spread)
+  /// "mean" (the experiments' mean residuals), "scatter" (their spread) or "run" (each run's
+  /// residual about its experiment's mean, for the runs of experiments that started at different
+  /// headings)
+  std::string part = "mean";
   bool testable = false;   // false: the feature does not vary across experiments (or no dof)
   double statistic = 0.0;  // F
   int dof1 = 0, dof2 = 0;
@@ -103,6 +110,14 @@ struct ResidualAlignment {
 /// estimated as in the mean part [McCullagh89, §8.3], so that an overall spread too large or tails
 /// heavier than Gaussian do not count (heading: two columns, F(2, m - 3)). group: log E s_e per
 /// group against a common one.
+/// Run part (heading only, and only for a suite whose runs of one experiment started at
+/// different headings: runs_start_at_different_headings). Over the experiments whose runs did,
+/// each run's end-frame residual about its experiment's mean, d_i, against the feature's columns
+/// about theirs, g_i, in weighted least squares (Sigma_i^-1):
+///   H1: d_i = sum_c g_ic a_c (a_c in R^3)   against   H0: d_i = 0,
+/// F = ((RSS0 - RSS1)/q) / (RSS1/(nu - q)) ~ F(q, nu - q), q = 3 x columns, nu = 3 sum (n_e - 1):
+/// the within-experiment analysis of variance, its scale estimated from RSS1. A spread between
+/// the runs that follows their heading is systematic: a random effect cannot explain it.
 /// Each p_value is Bonferroni-corrected over every testable feature and part.
 ///
 /// With `simulated`, the scatter part takes its dispersion from the model's own world instead:
