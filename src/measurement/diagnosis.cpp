@@ -278,6 +278,13 @@ struct FoldSet {
   std::size_t size() const { return folds.size(); }
 };
 
+/// The base's most significant feature of one part of the residual alignment, when significant
+/// at the family-wise alpha; computed once per round, when first needed.
+struct BaseFeature {
+  std::optional<ResidualAlignment> feature;
+  bool done = false;
+};
+
 /// What every candidate fit of a round shares: the suite and the fit settings, the model
 /// before the round (`before`, its comparison) and the base every candidate must improve on,
 /// the model's own effects refitted, with their names by kind and the base's log-likelihoods
@@ -304,11 +311,9 @@ struct Round {
   SuiteModel full;
   std::vector<std::string> full_names;
   std::optional<MeanDispersion> full_dispersion;
-  std::optional<ResidualAlignment> base_scatter_feature;  // the base's, when significant (scatter_shape)
-  bool base_scatter_done = false;
+  BaseFeature scatter_feature = {};  // the base's most significant scatter feature (scatter_shape)
   std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
-  std::optional<ResidualAlignment> base_run_feature;  // the base's, when significant (run_by_run)
-  bool base_run_done = false;
+  BaseFeature run_feature = {};  // the base's most significant run feature (run_by_run)
 
   std::atomic<std::int64_t>* counter() const { return progress ? &progress->evaluations : nullptr; }
   /// Throws Cancelled when the caller asked to stop.
@@ -709,6 +714,27 @@ std::vector<ResidualAlignment> scatter_features(const Round& round, const SuiteM
   return out;
 }
 
+/// The family-wise p-value of the base's most significant feature among `features` (of one part;
+/// `base` keeps it for the round) with the candidate's model, when the base's is significant at
+/// the family-wise alpha and the candidate's still is: the candidate did not explain what the
+/// misfit lines up with. Empty otherwise.
+std::optional<double> still_aligned(Round& round, const Trial& t, BaseFeature& base,
+                                    std::vector<ResidualAlignment> (*features)(const Round&, const SuiteModel&)) {
+  const double alpha = round.before.alpha;
+  if (!base.done) {
+    const std::vector<ResidualAlignment> found = features(round, round.base);
+    if (!found.empty() && found.front().p_value < alpha) base.feature = found.front();
+    base.done = true;
+  }
+  if (!base.feature) return {};
+  for (const ResidualAlignment& a : features(round, t.c.model)) {
+    if (a.feature != base.feature->feature) continue;
+    if (a.p_value < alpha) return a.p_value;
+    return {};
+  }
+  return {};
+}
+
 /// The scatter shape rule. The scatter test of residual_alignment is blind to the spread's
 /// overall level (its gamma GLM fits it), so a spread that grows with a feature of the path
 /// (speed, say) stays a significant feature whatever constant factor the noise takes, and a
@@ -720,23 +746,13 @@ std::vector<ResidualAlignment> scatter_features(const Round& round, const SuiteM
 /// radian turned took up a noise that grows with speed in blind worlds whose fast runs spin.
 /// Returns the decision's words when it stops the candidate.
 std::string scatter_shape(Round& round, const Trial& t) {
-  const double alpha = round.before.alpha;
-  if (!round.base_scatter_done) {
-    const std::vector<ResidualAlignment> base = scatter_features(round, round.base);
-    if (!base.empty() && base.front().p_value < alpha) round.base_scatter_feature = base.front();
-    round.base_scatter_done = true;
-  }
-  if (!round.base_scatter_feature) return {};
-  const ResidualAlignment& before = *round.base_scatter_feature;
-  for (const ResidualAlignment& a : scatter_features(round, t.c.model)) {
-    if (a.feature != before.feature) continue;
-    if (!(a.p_value < alpha)) return {};
-    return "not adopted: the runs' scatter lines up with " + before.feature + " (p = " +
-           format_number(before.p_value, "%.2g") + "), and with " + t.c.effect + " it still does (p = " +
-           format_number(a.p_value, "%.2g") + "): it does not give the spread that shape, so it imitates a " +
-           "noise of another kind: " + before.description;
-  }
-  return {};
+  const std::optional<double> p = still_aligned(round, t, round.scatter_feature, scatter_features);
+  if (!p) return {};
+  const ResidualAlignment& before = *round.scatter_feature.feature;
+  return "not adopted: the runs' scatter lines up with " + before.feature + " (p = " +
+         format_number(before.p_value, "%.2g") + "), and with " + t.c.effect + " it still does (p = " +
+         format_number(*p, "%.2g") + "): it does not give the spread that shape, so it imitates a " +
+         "noise of another kind: " + before.description;
 }
 
 /// A model's run part (residual_alignment): the features its runs' errors about their
@@ -761,23 +777,13 @@ std::vector<ResidualAlignment> run_features(const Round& round, const SuiteModel
 /// candidate is stopped when the run part stays significant with it. Returns the decision's
 /// words when it stops the candidate.
 std::string run_by_run(Round& round, const Trial& t) {
-  const double alpha = round.before.alpha;
-  if (!round.base_run_done) {
-    const std::vector<ResidualAlignment> base = run_features(round, round.base);
-    if (!base.empty() && base.front().p_value < alpha) round.base_run_feature = base.front();
-    round.base_run_done = true;
-  }
-  if (!round.base_run_feature) return {};
-  const ResidualAlignment& before = *round.base_run_feature;
-  for (const ResidualAlignment& a : run_features(round, t.c.model)) {
-    if (a.feature != before.feature) continue;
-    if (!(a.p_value < alpha)) return {};
-    return "not adopted: the runs of an experiment differ from each other along their " + before.feature +
-           " (p = " + format_number(before.p_value, "%.2g") + "), and with " + t.c.effect +
-           " they still do (p = " + format_number(a.p_value, "%.2g") +
-           "): the spread it widens the prediction for is systematic, not random: " + before.description;
-  }
-  return {};
+  const std::optional<double> p = still_aligned(round, t, round.run_feature, run_features);
+  if (!p) return {};
+  const ResidualAlignment& before = *round.run_feature.feature;
+  return "not adopted: the runs of an experiment differ from each other along their " + before.feature +
+         " (p = " + format_number(before.p_value, "%.2g") + "), and with " + t.c.effect + " they still do (p = " +
+         format_number(*p, "%.2g") + "): the spread it widens the prediction for is systematic, not random: " +
+         before.description;
 }
 
 /// The feature of the path the base's mean misfit lines up with most (residual_alignment; not
@@ -996,8 +1002,8 @@ bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& bef
                 "not adopted: with every effect refitted, " + joined(bounds) + " ends at the edge of its range");
   }
   if (judged_on_scatter(t, c.model)) {
-    const std::string runs = run_by_run(round, t);
-    if (!runs.empty()) return stop(c, "stopped", "run by run", runs);
+    const std::string by_run = run_by_run(round, t);
+    if (!by_run.empty()) return stop(c, "stopped", "run by run", by_run);
     const std::string shape = scatter_shape(round, t);
     if (!shape.empty()) return stop(c, "stopped", "scatter shape", shape);
   }
