@@ -132,8 +132,15 @@ TEST(CrossValidation, TheCacheKeepsVerdictsAndForgetsWhatARoundDidNotRead) {
   EXPECT_EQ(kept.calibration.replicates, fresh.calibration.replicates);
   EXPECT_EQ(kept.calibration.p_value, fresh.calibration.p_value);
   EXPECT_EQ(kept.log_likelihood, fresh.log_likelihood);
-  // Other options are another verdict.
+  // Other options are another verdict, and so is a training domain (the verdict names what
+  // lies outside it).
   EXPECT_NE(&cache.comparison(model, 0.05, referee), &kept);
+  SuiteModel bounded = model;
+  bounded.domain = Domain{{0.0, 0.1}, {0.0, 0.1}, {0.0, 1.0}, {0.0, 1.0}};
+  const Comparison& flagged = cache.comparison(bounded, 0.01, referee);
+  EXPECT_NE(&flagged, &kept);
+  EXPECT_TRUE(std::any_of(flagged.experiments.begin(), flagged.experiments.end(),
+                          [](const ExperimentComparison& e) { return !e.extrapolation.empty(); }));
   cache.at(other);
   const std::int64_t computed = cache.computed();
   cache.age();  // a round starts: everything above was read in the last one, and is kept

@@ -673,6 +673,13 @@ const Comparison& ResidualCache::comparison(const SuiteModel& model, double alph
   put(options.method);
   put(options.max_replicates);
   put(options.seed);
+  if (model.domain) {  // the verdict names the experiments outside it
+    for (const Domain::Range& r : {model.domain->speed_mps, model.domain->spin_fraction, model.domain->length_m,
+                                   model.domain->duration_s}) {
+      put(r.lo);
+      put(r.hi);
+    }
+  }
   return store_->get(store_->comparisons, key, [&] { return compare(*store_->suite, model, alpha, full(model), options); });
 }
 

@@ -86,6 +86,7 @@ class ResidualCache {
   /// with these options and kept: a verdict that several steps read (a round's model after, the
   /// next round's model before, calibrate's final account) is calibrated by its referee once.
   /// The referee is seeded (options.seed), so a kept verdict is the one a new compare would give.
+  /// The model's training domain is part of the key: the verdict names what lies outside it.
   const Comparison& comparison(const SuiteModel& model, double alpha, const CalibrationOptions& options);
   /// Forgets what was not read since the previous call (for a cache that outlives a round:
   /// what the next round can reuse is what this one read, so memory stays that of two rounds).
