@@ -153,7 +153,7 @@ void account(const Suite& suite, const CalibrateOptions& options, ResidualCache&
   const Comparison& c = cache.comparison(out.model, options.diagnose.alpha, options.diagnose.calibration);
   out.after = summarise(c);
   out.explained = c.verdict.consistent();
-  if (!out.explained) out.residuals = residual_alignment(suite, out.model, cache.at(out.model));
+  if (!out.explained) out.residuals = residual_alignment(cache, out.model);
   out.odometry_correction = odometry_correction(suite, out.model);
   FitResult at = design_point(out);
   if (at.names.empty()) return;

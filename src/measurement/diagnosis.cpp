@@ -708,7 +708,7 @@ bool judged_on_scatter(const Trial& t, const SuiteModel& model) { return !t.type
 std::vector<ResidualAlignment> scatter_features(const Round& round, const SuiteModel& model) {
   const SimulatedDispersion simulated{round.seed};
   std::vector<ResidualAlignment> out;
-  for (ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model), &simulated)) {
+  for (ResidualAlignment& a : residual_alignment(round.cache, model, &simulated)) {
     if (a.part == "scatter" && a.feature != "group" && a.testable) out.push_back(std::move(a));
   }
   return out;
@@ -761,7 +761,7 @@ std::string scatter_shape(Round& round, const Trial& t) {
 std::vector<ResidualAlignment> run_features(const Round& round, const SuiteModel& model) {
   std::vector<ResidualAlignment> out;
   if (!runs_start_at_different_headings(round.suite)) return out;
-  for (ResidualAlignment& a : residual_alignment(round.suite, model, round.cache.at(model))) {
+  for (ResidualAlignment& a : residual_alignment(round.cache, model)) {
     if (a.part == "run" && a.testable) out.push_back(std::move(a));
   }
   return out;
@@ -791,7 +791,7 @@ std::string run_by_run(Round& round, const Trial& t) {
 /// experiments along it (feature_folds); computed once per round.
 const ResidualAlignment* base_mean_feature(Round& round) {
   if (!round.base_mean_done) {
-    for (ResidualAlignment& a : residual_alignment(round.suite, round.base, round.cache.at(round.base))) {
+    for (ResidualAlignment& a : residual_alignment(round.cache, round.base)) {
       if (a.part != "mean" || a.feature == "group" || !a.testable) continue;
       if (a.p_value < round.before.alpha) {
         round.across.folds = feature_folds(
@@ -1118,7 +1118,7 @@ void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, 
   d.odometry_correction = odometry_correction(suite, d.best ? d.candidates[*d.best].model : model);
   if (!d.explained) {
     const SuiteModel& final_model = d.best ? d.candidates[*d.best].model : model;
-    d.residuals = residual_alignment(suite, final_model, cache.at(final_model));
+    d.residuals = residual_alignment(cache, final_model);
   }
 }
 

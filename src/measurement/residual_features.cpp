@@ -384,7 +384,7 @@ void experiment_scatter(const std::vector<Vector3>& r, const std::vector<Matrix3
 /// features, group and scatter part. False when the covariance is not positive definite (no
 /// test can use the experiment).
 bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& residuals,
-                     const std::vector<Residuals>& nudges, double B, ExperimentMean& m) {
+                     const std::vector<const Residuals*>& nudges, double B, ExperimentMean& m) {
   const double n = static_cast<double>(ex.runs.size());
   Matrix3 C = Matrix3::Zero();
   std::vector<Vector3> runs;
@@ -397,7 +397,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
     m.frames.push_back(R);
     m.r += runs.back() / n;
     for (int j = 0; j < kDim; ++j) {
-      m.S.col(j) += R * (nudges[static_cast<std::size_t>(j)][e][r].mean - res.mean) / (kSensitivityStep * n);
+      m.S.col(j) += R * ((*nudges[static_cast<std::size_t>(j)])[e][r].mean - res.mean) / (kSensitivityStep * n);
     }
     C += covs.back() / (n * n);
   }
@@ -415,13 +415,12 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
   return true;
 }
 
-/// The means of every experiment with runs and a usable covariance.
-std::vector<ExperimentMean> experiment_means(const Suite& suite, const SuiteModel& model,
-                                             const Residuals& residuals) {
+/// The means of every experiment with runs and a usable covariance; `nudges` are the residuals
+/// of the model nudged along each of kDirections (the first-order sensitivity of every run's
+/// predicted mean to each factor direction).
+std::vector<ExperimentMean> experiment_means(const Suite& suite, const SuiteModel& model, const Residuals& residuals,
+                                             const std::vector<const Residuals*>& nudges) {
   const double B = model.robot.wheelbase_m;
-  // First-order sensitivity of every run's predicted mean to each factor direction.
-  std::vector<Residuals> nudges;
-  for (const char* effect : kDirections) nudges.push_back(odomcov::residuals(suite, nudged(model, effect)));
   std::vector<ExperimentMean> ms;
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     const SuiteExperiment& ex = suite.experiments[e];
@@ -791,10 +790,13 @@ const std::vector<std::string>& residual_feature_names() {
   return names;
 }
 
-std::vector<ResidualAlignment> residual_alignment(
-    const Suite& suite, const SuiteModel& model,
-    const std::vector<std::vector<RunResidual>>& residuals, const SimulatedDispersion* simulated) {
-  std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals);
+namespace {
+
+/// residual_alignment with the nudged models' residuals given.
+std::vector<ResidualAlignment> alignment(const Suite& suite, const SuiteModel& model, const Residuals& residuals,
+                                         const std::vector<const Residuals*>& nudges,
+                                         const SimulatedDispersion* simulated) {
+  std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals, nudges);
   if (simulated) simulated_dispersions(suite, model, residuals, *simulated, ms);
   // Mean part, H0: the misfit is a constant offset in the end frame plus constant factor
   // errors, r_e = [I3 S_e] c. H1 adds the same terms modulated by the feature, f_e [I3 S_e] d: a
@@ -835,6 +837,24 @@ std::vector<ResidualAlignment> residual_alignment(
   }
   adjust_and_rank(out);
   return out;
+}
+
+}  // namespace
+
+std::vector<ResidualAlignment> residual_alignment(const Suite& suite, const SuiteModel& model,
+                                                  const Residuals& residuals, const SimulatedDispersion* simulated) {
+  std::vector<Residuals> nudges;
+  for (const char* effect : kDirections) nudges.push_back(odomcov::residuals(suite, nudged(model, effect)));
+  std::vector<const Residuals*> read;
+  for (const Residuals& r : nudges) read.push_back(&r);
+  return alignment(suite, model, residuals, read, simulated);
+}
+
+std::vector<ResidualAlignment> residual_alignment(ResidualCache& cache, const SuiteModel& model,
+                                                  const SimulatedDispersion* simulated) {
+  std::vector<const Residuals*> nudges;  // the cache's entries stay where they are until it ages
+  for (const char* effect : kDirections) nudges.push_back(&cache.full(nudged(model, effect)));
+  return alignment(cache.suite(), model, cache.full(model), nudges, simulated);
 }
 
 }  // namespace odomcov

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "odomcov/measurement/calibration.hpp"
 #include "odomcov/measurement/likelihood.hpp"
 
 namespace odomcov {
@@ -138,5 +139,12 @@ struct SimulatedDispersion {
 std::vector<ResidualAlignment> residual_alignment(
     const Suite& suite, const SuiteModel& model,
     const std::vector<std::vector<RunResidual>>& residuals, const SimulatedDispersion* simulated = nullptr);
+
+/// The same on the suite of `cache`, with the model's residuals and those of the models the
+/// mean part nudges along each factor direction read through it: a decision that asks several
+/// parts of one model (diagnose's rules ask the base's mean, scatter and run parts) propagates
+/// them once. Every part is tested each time, since each p-value is corrected over all of them.
+std::vector<ResidualAlignment> residual_alignment(ResidualCache& cache, const SuiteModel& model,
+                                                  const SimulatedDispersion* simulated = nullptr);
 
 }  // namespace odomcov
