@@ -298,6 +298,64 @@ Suite standard_lab(const std::string& effects, std::uint64_t seed, const std::fi
   return synthesised(text, effects, dir);
 }
 
+/// The small lab recorded on eight days with 6 runs per experiment: 32 experiments, none of
+/// the ten runs compare's kurtosis test needs (a lab of a few runs per session).
+std::string days_world(const std::string& effects, std::uint64_t seed, double k) {
+  const std::string text = lab_world(effects, seed, k);
+  const std::size_t at = text.find("experiments:\n") + 13;
+  std::string head = text.substr(0, at), days;
+  for (int day = 1; day <= 8; ++day) {
+    std::string block = text.substr(at);
+    block = std::regex_replace(block, std::regex("name: ([a-z0-9-]+)"), "name: $1-day" + std::to_string(day));
+    block = std::regex_replace(block, std::regex("group: [ab]"), "group: day" + std::to_string(day));
+    days += std::regex_replace(block, std::regex("runs: 20"), "runs: 6");
+  }
+  return head + days;
+}
+
+/// tails_test (diagnose's tails rule) on days_world: how many of `labs` labs of `world` reject
+/// `model` at alpha (199 replicates of its world each).
+int tails_rejections(const std::string& world, const std::string& model, int labs, double alpha, std::uint64_t first_seed,
+                     double k = kNominalNoise) {
+  const auto dir = test::scratch_dir("tails_test");
+  int rejected = 0;
+  for (int i = 0; i < labs; ++i) {
+    const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(i);
+    const Suite s = synthesised(days_world(world, seed, k), model, dir / std::to_string(i));
+    const SuiteModel m = suite_model(s);
+    const TailsTest t = tails_test(s, m, residuals(s, m), 199, seed + 77);
+    EXPECT_TRUE(t.valid);
+    EXPECT_EQ(t.experiments, 32);
+    rejected += t.p_value < alpha ? 1 : 0;
+  }
+  return rejected;
+}
+
+/// tails_test against the model's own world keeps its size: on 60 labs each of a Gaussian world,
+/// one with bumps and one with a large heading noise (whose end poses are not Gaussian), each
+/// against its true model, the rejections at 0.05 stay within the binomial(60, 0.05) upper
+/// quantile at 5e-4 (Bonferroni over the three). Against a wrong model it rejects more often than
+/// that bound allows: bumps data against the Gaussian model (heavier tails than its world gives)
+/// and against bumps twice as large at the same variance (lighter).
+TEST(TailsTest, HasItsSizeOnCorrectModelsAndPowerOnWrongTails) {
+  constexpr double kAlpha = 0.05;
+  constexpr int kLabs = 60;
+  const double upper = boost::math::quantile(boost::math::complement(boost::math::binomial(kLabs, kAlpha), 5e-4));
+  const std::string systematic = kSystematic, bumps = systematic + kBumps;
+  const int gaussian = tails_rejections(systematic, systematic, kLabs, kAlpha, 8100);
+  const int heavy = tails_rejections(bumps, bumps, kLabs, kAlpha, 8200);
+  const int heading = tails_rejections(systematic, systematic, kLabs, kAlpha, 8300, kLargeHeadingNoise);
+  const int missing = tails_rejections(bumps, systematic, kLabs, kAlpha, 8400);
+  const int too_big = tails_rejections(bumps, systematic + kBumpsTooBig, kLabs, kAlpha, 8500);
+  std::printf("tails test at %.2f of %d labs (bound %g): gaussian %d, bumps %d, heading noise %d; wrong: bumps "
+              "missing %d, bumps too big %d\n", kAlpha, kLabs, upper, gaussian, heavy, heading, missing, too_big);
+  EXPECT_LE(gaussian, upper);
+  EXPECT_LE(heavy, upper);
+  EXPECT_LE(heading, upper);
+  EXPECT_GT(missing, upper);
+  EXPECT_GT(too_big, upper);
+}
+
 /// Over every look, on the standard lab: at alpha = 0.01 the sequential referee rejects a
 /// correct model (bumps: not Gaussian) with probability at most alpha (docs/diagnose.md, "How
 /// many replicates"). Over 200 standard labs the rejections stay below the binomial(200, 0.01)

@@ -25,6 +25,9 @@ namespace {
 constexpr int kDim = 3;
 /// The LRT's Bartlett-corrected chi^2 is accurate from about ten runs; below, the NEES test.
 constexpr std::int64_t kMinRunsForLrt = 10;
+/// tails_test pools every experiment whose b2 varies: n >= p + 2 runs (with p + 1 the
+/// standardised runs form a simplex and b2 is fixed).
+constexpr std::size_t kMinRunsForTails = kDim + 2;
 /// chi^2_3 95% point (Abramowitz & Stegun 26.8): the NEES bound of "outside_95".
 constexpr double kChi2_3_95 = 7.814727903251178;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -827,12 +830,13 @@ void choose_and_calibrate(const Suite& suite, const SuiteModel& model,
                                                   : "requested, though not exact here: " + not_gaussian;
 }
 
-/// The experiments the kurtosis pools: those whose every run whitens, with kMinRunsForLrt runs
-/// or more.
-std::vector<std::uint8_t> pooled_experiments(const Prepared& p) {
+/// The experiments a kurtosis pools: those whose every run whitens, with `min_runs` runs or more
+/// (compare's test: kMinRunsForLrt).
+std::vector<std::uint8_t> pooled_experiments(const Prepared& p,
+                                             std::size_t min_runs = static_cast<std::size_t>(kMinRunsForLrt)) {
   std::vector<std::uint8_t> out;
   for (std::size_t e = 0; e < p.experiments(); ++e) {
-    bool ok = p.runs_of(e) >= static_cast<std::size_t>(kMinRunsForLrt);
+    bool ok = p.runs_of(e) >= min_runs;
     for (std::size_t i = p.first[e]; ok && i < p.first[e + 1]; ++i) ok = p.runs[i].whitens;
     out.push_back(ok);
   }
@@ -841,12 +845,14 @@ std::vector<std::uint8_t> pooled_experiments(const Prepared& p) {
 
 }  // namespace
 
-double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
-                          const std::vector<std::vector<RunResidual>>& residuals,
-                          std::int64_t replicates, std::uint64_t seed) {
-  const Prepared p = prepare(residuals);
-  const std::vector<std::uint8_t> pooled = pooled_experiments(p);
-  if (std::find(pooled.begin(), pooled.end(), 1) == pooled.end()) return kNaN;
+namespace {
+
+/// The pooled b2 of `replicates` replicates of the model's world (ModelWorld, seeded), over the
+/// experiments `pooled` marks, each replicate whitened as the data are (p). Throws EffectError
+/// when the model's effects cannot be simulated on some run.
+std::vector<double> replicate_b2(const Suite& suite, const SuiteModel& model, const Prepared& p,
+                                 const std::vector<std::uint8_t>& pooled, std::int64_t replicates,
+                                 std::uint64_t seed) {
   const ModelWorld world(suite, model, seed);
   std::vector<Vector3> errors;
   world.errors(0, replicates, errors);
@@ -862,9 +868,55 @@ double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
     }
     b2[static_cast<std::size_t>(b)] = pool.b2();
   });
+  return b2;
+}
+
+}  // namespace
+
+double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
+                          const std::vector<std::vector<RunResidual>>& residuals,
+                          std::int64_t replicates, std::uint64_t seed) {
+  const Prepared p = prepare(residuals);
+  const std::vector<std::uint8_t> pooled = pooled_experiments(p);
+  if (std::find(pooled.begin(), pooled.end(), 1) == pooled.end()) return kNaN;
   double mean = 0.0;
-  for (double v : b2) mean += v / static_cast<double>(replicates);
+  for (double v : replicate_b2(suite, model, p, pooled, replicates, seed)) mean += v / static_cast<double>(replicates);
   return mean;
+}
+
+TailsTest tails_test(const Suite& suite, const SuiteModel& model,
+                     const std::vector<std::vector<RunResidual>>& residuals, int replicates, std::uint64_t seed) {
+  TailsTest out;
+  const Prepared p = prepare(residuals);
+  const std::vector<std::uint8_t> pooled = pooled_experiments(p, kMinRunsForTails);
+  std::vector<Vector3> errors;
+  for (const auto& ex : residuals) {
+    for (const RunResidual& r : ex) errors.push_back(r.error);
+  }
+  Workspace ws;
+  ws.z.resize(errors.size());
+  whiten(p, errors.data(), ws.m, ws.z.data());
+  KurtosisPool data;
+  for (std::size_t e = 0; e < p.experiments(); ++e) {
+    if (!pooled[e]) continue;
+    data.add(ws.z.data() + p.first[e], p.runs_of(e));
+    ++out.experiments;
+  }
+  if (out.experiments == 0 || replicates < 1) return out;
+  std::vector<double> b2;
+  try {
+    b2 = replicate_b2(suite, model, p, pooled, replicates, seed);
+  } catch (const EffectError&) {
+    return out;
+  }
+  out.b2 = data.b2();
+  int above = 0, below = 0;
+  for (double v : b2) above += v >= out.b2, below += v <= out.b2;
+  std::nth_element(b2.begin(), b2.begin() + replicates / 2, b2.end());
+  out.model = b2[static_cast<std::size_t>(replicates / 2)];
+  out.p_value = std::min(1.0, 2.0 * (1.0 + std::min(above, below)) / (1.0 + replicates));
+  out.valid = true;
+  return out;
 }
 
 const char* calibration_name(CalibrationMethod method) {

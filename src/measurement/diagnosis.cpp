@@ -1109,6 +1109,100 @@ std::size_t prefer_consistent_rival(Round& round, std::vector<Trial>& trials, st
   return best;
 }
 
+/// True for a candidate whose effect has tails that the Gaussian likelihood cannot see
+/// (EffectInfo::rescale_tails: bumps).
+bool heavy_tailed(const Trial& t) {
+  const EffectSpec* spec = find_spec(t.c.model.effects, t.type->effect);
+  return spec != nullptr && info_of(*spec)->rescale_tails != nullptr;
+}
+
+/// Replicates of a tied candidate's world behind the tails rule (tails_test): with 499 a
+/// two-sided p-value can fall below alpha = 0.01 (its smallest is 2/500).
+constexpr int kTailsReplicates = 499;
+
+/// "11.3 in its world, p = 0.03": a tails_test's median in the model's world and p-value.
+std::string tails_words(const TailsTest& t) {
+  return format_number(t.model, "%.4g") + " in its world, p = " + format_number(t.p_value, "%.2g");
+}
+
+/// tails_test of a candidate's model against the data.
+TailsTest tails_of(Round& round, const Candidate& c) {
+  return tails_test(round.suite, c.model, round.cache.at(c.model), kTailsReplicates, round.seed);
+}
+
+/// What the runs' tails say on a tie between the adopted candidate `best` and a `rival` of the
+/// other shape (tails_test of each model's world):
+/// the words, and whether the rival is to take its place. Empty when the tails cannot tell: a
+/// world could not be simulated, or neither has the data's tails.
+struct TailsVerdict {
+  std::string words;
+  bool rival = false;
+};
+
+std::optional<TailsVerdict> tails_verdict(const Candidate& best, const Candidate& rival, bool best_heavy, double z,
+                                          const TailsTest& best_tails, const TailsTest& rival_tails, double alpha) {
+  const Candidate& heavy = best_heavy ? best : rival;
+  const Candidate& plain = best_heavy ? rival : best;
+  const TailsTest& h = best_heavy ? best_tails : rival_tails;
+  const TailsTest& g = best_heavy ? rival_tails : best_tails;
+  const bool heavy_shown = g.p_value < alpha;
+  if (!h.valid || !g.valid || (heavy_shown && h.p_value < alpha)) return {};
+  std::string text = " the likelihood cannot tell " + best.effect + " from " + rival.effect + " (Vuong z = " +
+                     format_number(z, "%.2f") + "), and the runs' tails (pooled Mardia kurtosis " +
+                     format_number(g.b2, "%.4g") + " over " + std::to_string(g.experiments) + " experiments) are ";
+  text += heavy_shown ? "heavier than " + plain.effect + "'s world gives (" + tails_words(g) + ") and as " +
+                            heavy.effect + "'s gives (" + tails_words(h) + ")"
+                      : "no heavier than " + plain.effect + "'s world gives (" + tails_words(g) + "; " + heavy.effect +
+                            "'s: " + tails_words(h) + "): the heavy tails that would set " + heavy.effect +
+                            " apart are not in the data";
+  return TailsVerdict{text, heavy_shown != best_heavy};
+}
+
+/// The tails rule. A wheel noise level and bumps add the same variance per metre, so the
+/// Gaussian likelihood that ranks them ties them, and the ranking then turns on their numbers of
+/// parameters; compare's kurtosis test, which would see the difference, needs experiments of ten
+/// runs, and a lab of a few runs per session has none. When the adopted random candidate and a
+/// significant random rival of the other shape (one heavy-tailed, the other not) are a tie
+/// (|Vuong z| below the two-sided alpha point), the tails decide, the heavy-tailed shape needing
+/// the evidence, as a richer candidate needs it in the nested rule: each model's own world is
+/// simulated and the runs' pooled Mardia kurtosis (tails_test, every experiment of five runs or
+/// more) set against it. The heavy-tailed candidate is adopted when the data's tails reject the
+/// other's world at the family-wise alpha and not its own; otherwise the other one. A rival
+/// adopted instead must pass every rule, and leave the model consistent when the adopted one
+/// does. Returns the adopted trial's index.
+std::size_t prefer_by_tails(Round& round, std::vector<Trial>& trials, std::size_t best, double per_candidate,
+                            const ModelSummary& before, std::size_t runs, const CalibrationOptions& calibration) {
+  if (trials[best].c.systematic) return best;
+  const bool best_heavy = heavy_tailed(trials[best]);
+  const double alpha = round.before.alpha;
+  const double z_alpha = boost::math::quantile(boost::math::complement(boost::math::normal(), 0.5 * alpha));
+  std::optional<TailsTest> best_tails;
+  for (std::size_t j = best + 1; j < trials.size() && trials[j].c.significant; ++j) {
+    Trial& rival = trials[j];
+    const bool other_shape = !rival.c.systematic && heavy_tailed(rival) != best_heavy && rival.c.decision.empty();
+    const double z = other_shape ? vuong_z(round, trials[best], rival) : kInfinity;
+    if (!(std::abs(z) < z_alpha)) continue;
+    round.check_cancel();
+    if (!best_tails) best_tails = tails_of(round, trials[best].c);
+    if (!best_tails->valid) return best;
+    if (!judge(round, rival, per_candidate, before, runs)) continue;
+    const std::optional<TailsVerdict> v =
+        tails_verdict(trials[best].c, rival.c, best_heavy, z, *best_tails, tails_of(round, rival.c), alpha);
+    if (!v) continue;
+    const bool inconsistent = v->rival && consistent_model(round, trials[best].c.model, calibration) &&
+                              !consistent_model(round, rival.c.model, calibration);
+    if (!v->rival || inconsistent) {
+      stop(rival.c, "not judged", "",
+           "passes every rule, but" + v->words + (inconsistent ? ", and with it compare finds the model inconsistent" : ""));
+      return best;
+    }
+    stop(trials[best].c, "stopped", "tails", "not adopted:" + v->words);
+    rival.c.decision += ";" + v->words;
+    return j;
+  }
+  return best;
+}
+
 /// The outcome: the final model (the best candidate's, else the suite's) compared again, its
 /// corrected odometry and, when it still misfits, what the misfit lines up with.
 void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, ResidualCache& cache,
@@ -1217,6 +1311,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   }
   if (d.best) d.best = prefer_nested_simpler(round, trials, *d.best, per_candidate, d.before, d.runs);
   if (d.best) d.best = prefer_consistent_rival(round, trials, *d.best, per_candidate, d.before, d.runs, options.calibration);
+  if (d.best) d.best = prefer_by_tails(round, trials, *d.best, per_candidate, d.before, d.runs, options.calibration);
   for (Trial& t : trials) d.candidates.push_back(std::move(t.c));
   if (progress) progress->fits_done = progress->fits_total.load();
   explain_outcome(d, suite, model, cache, options.calibration);

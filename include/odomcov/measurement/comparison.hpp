@@ -170,4 +170,24 @@ double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
                           const std::vector<std::vector<RunResidual>>& residuals,
                           std::int64_t replicates, std::uint64_t seed);
 
+/// The data's tails against the model's own world, for a decision that compare's kurtosis test
+/// cannot make (it pools only experiments of kMinRunsForLrt runs or more, and a lab of a few runs
+/// per session has none): Mardia's b2 pooled as compare pools it, run-weighted, over every
+/// experiment of at least 5 runs whose runs all whiten, each run whitened by its predicted
+/// covariance and each experiment then standardised by its own mean and covariance, so that
+/// only the shape of the errors counts; set against `replicates` replicates of the model's world
+/// (ModelWorld, seeded), whitened alike. Its two-sided p-value is
+/// 2 (1 + min(#{b2* >= b2}, #{b2* <= b2})) / (1 + replicates): tails heavier or lighter than the
+/// model's own (bumps that the data do not show, or tails beyond a Gaussian model's). Not valid
+/// when no experiment qualifies or the model's effects cannot be simulated.
+struct TailsTest {
+  double b2 = 0.0;       // the data's pooled b2
+  double model = 0.0;    // its median in the model's world
+  double p_value = 1.0;  // two-sided
+  int experiments = 0;   // pooled
+  bool valid = false;
+};
+TailsTest tails_test(const Suite& suite, const SuiteModel& model,
+                     const std::vector<std::vector<RunResidual>>& residuals, int replicates, std::uint64_t seed);
+
 }  // namespace odomcov
