@@ -1131,31 +1131,43 @@ TailsTest tails_of(Round& round, const Candidate& c) {
 }
 
 /// What the runs' tails say on a tie between the adopted candidate `best` and a `rival` of the
-/// other shape (tails_test of each model's world):
-/// the words, and whether the rival is to take its place. Empty when the tails cannot tell: a
-/// world could not be simulated, or neither has the data's tails.
+/// other shape (tails_test of each model's world): the words, and whether the rival is to take
+/// its place; undecided when a world could not be simulated or neither has the data's tails.
 struct TailsVerdict {
   std::string words;
+  bool decided = false;
   bool rival = false;
 };
 
-std::optional<TailsVerdict> tails_verdict(const Candidate& best, const Candidate& rival, bool best_heavy, double z,
-                                          const TailsTest& best_tails, const TailsTest& rival_tails, double alpha) {
+TailsVerdict tails_verdict(const Candidate& best, const Candidate& rival, bool best_heavy, double z,
+                           const TailsTest& best_tails, const TailsTest& rival_tails, double alpha) {
   const Candidate& heavy = best_heavy ? best : rival;
   const Candidate& plain = best_heavy ? rival : best;
   const TailsTest& h = best_heavy ? best_tails : rival_tails;
   const TailsTest& g = best_heavy ? rival_tails : best_tails;
+  TailsVerdict v;
+  v.words = " the likelihood cannot tell " + best.effect + " from " + rival.effect + " (Vuong z = " +
+            format_number(z, "%.2f") + ")";
+  if (!h.valid || !g.valid) {
+    v.words += ", and the tails cannot either (a model's world could not be simulated)";
+    return v;
+  }
   const bool heavy_shown = g.p_value < alpha;
-  if (!h.valid || !g.valid || (heavy_shown && h.p_value < alpha)) return {};
-  std::string text = " the likelihood cannot tell " + best.effect + " from " + rival.effect + " (Vuong z = " +
-                     format_number(z, "%.2f") + "), and the runs' tails (pooled Mardia kurtosis " +
-                     format_number(g.b2, "%.4g") + " over " + std::to_string(g.experiments) + " experiments) are ";
-  text += heavy_shown ? "heavier than " + plain.effect + "'s world gives (" + tails_words(g) + ") and as " +
-                            heavy.effect + "'s gives (" + tails_words(h) + ")"
-                      : "no heavier than " + plain.effect + "'s world gives (" + tails_words(g) + "; " + heavy.effect +
-                            "'s: " + tails_words(h) + "): the heavy tails that would set " + heavy.effect +
-                            " apart are not in the data";
-  return TailsVerdict{text, heavy_shown != best_heavy};
+  v.words += ", and the runs' tails (pooled Mardia kurtosis " + format_number(g.b2, "%.4g") + " over " +
+             std::to_string(g.experiments) + " experiments) are ";
+  if (heavy_shown && h.p_value < alpha) {
+    v.words += "neither " + plain.effect + "'s world's (" + tails_words(g) + ") nor " + heavy.effect + "'s (" +
+               tails_words(h) + ")";
+    return v;
+  }
+  v.words += heavy_shown ? "heavier than " + plain.effect + "'s world gives (" + tails_words(g) + ") and as " +
+                               heavy.effect + "'s gives (" + tails_words(h) + ")"
+                         : "no heavier than " + plain.effect + "'s world gives (" + tails_words(g) + "; " +
+                               heavy.effect + "'s: " + tails_words(h) + "): the heavy tails that would set " +
+                               heavy.effect + " apart are not in the data";
+  v.decided = true;
+  v.rival = heavy_shown != best_heavy;
+  return v;
 }
 
 /// The tails rule. A wheel noise level and bumps add the same variance per metre, so the
@@ -1169,7 +1181,7 @@ std::optional<TailsVerdict> tails_verdict(const Candidate& best, const Candidate
 /// more) set against it. The heavy-tailed candidate is adopted when the data's tails reject the
 /// other's world at the family-wise alpha and not its own; otherwise the other one. A rival
 /// adopted instead must pass every rule, and leave the model consistent when the adopted one
-/// does. Returns the adopted trial's index.
+/// does; one the tails do not decide is reported so. Returns the adopted trial's index.
 std::size_t prefer_by_tails(Round& round, std::vector<Trial>& trials, std::size_t best, double per_candidate,
                             const ModelSummary& before, std::size_t runs, const CalibrationOptions& calibration) {
   if (trials[best].c.systematic) return best;
@@ -1186,18 +1198,18 @@ std::size_t prefer_by_tails(Round& round, std::vector<Trial>& trials, std::size_
     if (!best_tails) best_tails = tails_of(round, trials[best].c);
     if (!best_tails->valid) return best;
     if (!judge(round, rival, per_candidate, before, runs)) continue;
-    const std::optional<TailsVerdict> v =
+    const TailsVerdict v =
         tails_verdict(trials[best].c, rival.c, best_heavy, z, *best_tails, tails_of(round, rival.c), alpha);
-    if (!v) continue;
-    const bool inconsistent = v->rival && consistent_model(round, trials[best].c.model, calibration) &&
+    const bool inconsistent = v.rival && consistent_model(round, trials[best].c.model, calibration) &&
                               !consistent_model(round, rival.c.model, calibration);
-    if (!v->rival || inconsistent) {
+    if (!v.rival || inconsistent) {
       stop(rival.c, "not judged", "",
-           "passes every rule, but" + v->words + (inconsistent ? ", and with it compare finds the model inconsistent" : ""));
-      return best;
+           "passes every rule, but" + v.words + (inconsistent ? ", and with it compare finds the model inconsistent" : ""));
+      if (v.decided) return best;
+      continue;
     }
-    stop(trials[best].c, "stopped", "tails", "not adopted:" + v->words);
-    rival.c.decision += ";" + v->words;
+    stop(trials[best].c, "stopped", "tails", "not adopted:" + v.words);
+    rival.c.decision += ";" + v.words;
     return j;
   }
   return best;
