@@ -250,6 +250,18 @@ struct Workspace {
   std::vector<Eigen::Vector2d> m;
 };
 
+/// The data's errors, run by run in suite order, and their whitened residuals in ws.z.
+std::vector<Vector3> whiten_data(const Prepared& p, const std::vector<std::vector<RunResidual>>& grouped,
+                                 Workspace& ws) {
+  std::vector<Vector3> errors;
+  for (const auto& ex : grouped) {
+    for (const RunResidual& r : ex) errors.push_back(r.error);
+  }
+  ws.z.resize(errors.size());
+  whiten(p, errors.data(), ws.m, ws.z.data());
+  return errors;
+}
+
 /// The scores of every test for one set of errors (the data, or a replicate): the same
 /// whitening, tests and kurtosis compare reports. NaN for a test that does not exist.
 void scores(const Prepared& p, const TestLayout& layout, const Vector3* errors, Workspace& ws,
@@ -889,13 +901,8 @@ TailsTest tails_test(const Suite& suite, const SuiteModel& model,
   TailsTest out;
   const Prepared p = prepare(residuals);
   const std::vector<std::uint8_t> pooled = pooled_experiments(p, kMinRunsForTails);
-  std::vector<Vector3> errors;
-  for (const auto& ex : residuals) {
-    for (const RunResidual& r : ex) errors.push_back(r.error);
-  }
   Workspace ws;
-  ws.z.resize(errors.size());
-  whiten(p, errors.data(), ws.m, ws.z.data());
+  whiten_data(p, residuals, ws);
   KurtosisPool data;
   for (std::size_t e = 0; e < p.experiments(); ++e) {
     if (!pooled[e]) continue;
@@ -947,13 +954,8 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
   out.alpha = alpha;
   const Prepared p = prepare(grouped);
   const auto own = marginal(grouped);
-  std::vector<Vector3> errors;
-  for (const auto& ex : grouped) {
-    for (const RunResidual& r : ex) errors.push_back(r.error);
-  }
   Workspace ws;
-  ws.z.resize(errors.size());
-  whiten(p, errors.data(), ws.m, ws.z.data());
+  const std::vector<Vector3> errors = whiten_data(p, grouped, ws);
   // Mardia's multivariate kurtosis [Mardia70] as a test of shape only: each experiment's
   // whitened residuals are standardised by that experiment's own mean and covariance (so scale
   // and mean misfits, which differ between experiments, do not read as tails), and the
