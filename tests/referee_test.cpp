@@ -299,7 +299,8 @@ Suite standard_lab(const std::string& effects, std::uint64_t seed, const std::fi
 }
 
 /// The small lab recorded on eight days with 6 runs per experiment: 32 experiments, none of
-/// the ten runs compare's kurtosis test needs (a lab of a few runs per session).
+/// the ten runs compare's kurtosis test needs (a lab of a few runs per session); sampled at
+/// 10 Hz to keep the replicates quick (the aarch64 tests run under emulation).
 std::string days_world(const std::string& effects, std::uint64_t seed, double k) {
   const std::string text = lab_world(effects, seed, k);
   const std::size_t at = text.find("experiments:\n") + 13;
@@ -308,13 +309,14 @@ std::string days_world(const std::string& effects, std::uint64_t seed, double k)
     std::string block = text.substr(at);
     block = std::regex_replace(block, std::regex("name: ([a-z0-9-]+)"), "name: $1-day" + std::to_string(day));
     block = std::regex_replace(block, std::regex("group: [ab]"), "group: day" + std::to_string(day));
+    block = std::regex_replace(block, std::regex("sample_rate: 20"), "sample_rate: 10");
     days += std::regex_replace(block, std::regex("runs: 20"), "runs: 6");
   }
   return head + days;
 }
 
 /// tails_test (diagnose's tails rule) on days_world: how many of `labs` labs of `world` reject
-/// `model` at alpha (199 replicates of its world each).
+/// `model` at alpha (99 replicates of its world each: a two-sided p-value resolves 0.02).
 int tails_rejections(const std::string& world, const std::string& model, int labs, double alpha, std::uint64_t first_seed,
                      double k = kNominalNoise) {
   const auto dir = test::scratch_dir("tails_test");
@@ -323,7 +325,7 @@ int tails_rejections(const std::string& world, const std::string& model, int lab
     const std::uint64_t seed = first_seed + static_cast<std::uint64_t>(i);
     const Suite s = synthesised(days_world(world, seed, k), model, dir / std::to_string(i));
     const SuiteModel m = suite_model(s);
-    const TailsTest t = tails_test(s, m, residuals(s, m), 199, seed + 77);
+    const TailsTest t = tails_test(s, m, residuals(s, m), 99, seed + 77);
     EXPECT_TRUE(t.valid);
     EXPECT_EQ(t.experiments, 32);
     rejected += t.p_value < alpha ? 1 : 0;
@@ -336,7 +338,8 @@ int tails_rejections(const std::string& world, const std::string& model, int lab
 /// against its true model, the rejections at 0.05 stay within the binomial(60, 0.05) upper
 /// quantile at 5e-4 (Bonferroni over the three). Against a wrong model it rejects more often than
 /// that bound allows: bumps data against the Gaussian model (heavier tails than its world gives)
-/// and against bumps twice as large at the same variance (lighter).
+/// and against bumps twice as large at the same variance (lighter). Measured: 4, 2 and 1 of 60;
+/// 25 and 26 against the wrong models.
 TEST(TailsTest, HasItsSizeOnCorrectModelsAndPowerOnWrongTails) {
   constexpr double kAlpha = 0.05;
   constexpr int kLabs = 60;
