@@ -1045,6 +1045,17 @@ double vuong_z(const Round& round, const Trial& a, const Trial& b) {
   return sd > 0 ? mean * std::sqrt(n) / sd : (mean == 0.0 ? 0.0 : std::copysign(kInfinity, mean));
 }
 
+/// True when the likelihood cannot tell two fitted candidates apart: |Vuong z| below the
+/// two-sided point of the family-wise alpha.
+bool likelihood_ties(double z, double alpha) {
+  return std::abs(z) < boost::math::quantile(boost::math::complement(boost::math::normal(), 0.5 * alpha));
+}
+
+/// " the likelihood cannot tell a from b (Vuong z = z)".
+std::string tie_words(const Candidate& a, const Candidate& b, double z) {
+  return " the likelihood cannot tell " + a.effect + " from " + b.effect + " (Vuong z = " + format_number(z, "%.2f") + ")";
+}
+
 /// The rule for nested candidates. A candidate that contains a simpler significant one
 /// (CandidateType::contains: it reduces to it exactly at some of its parameter values) is
 /// adopted over it only when it fits significantly better: the likelihood ratio of the two
@@ -1087,15 +1098,13 @@ bool consistent_model(const Round& round, const SuiteModel& model, const Calibra
 std::size_t prefer_consistent_rival(Round& round, std::vector<Trial>& trials, std::size_t best, double per_candidate,
                                     const ModelSummary& before, std::size_t runs, const CalibrationOptions& calibration) {
   if (consistent_model(round, trials[best].c.model, calibration)) return best;
-  const double z_alpha = boost::math::quantile(boost::math::complement(boost::math::normal(), 0.5 * round.before.alpha));
   for (std::size_t j = best + 1; j < trials.size() && trials[j].c.significant; ++j) {
     if (trials[j].c.systematic != trials[best].c.systematic) continue;
     const double z = vuong_z(round, trials[best], trials[j]);
-    if (!(std::abs(z) < z_alpha)) continue;
+    if (!likelihood_ties(z, round.before.alpha)) continue;
     round.check_cancel();
     if (!judge(round, trials[j], per_candidate, before, runs)) continue;
-    const std::string tie = " the likelihood cannot tell " + trials[best].c.effect + " from " + trials[j].c.effect +
-                            " (Vuong z = " + format_number(z, "%.2f") + ")";
+    const std::string tie = tie_words(trials[best].c, trials[j].c, z);
     if (!consistent_model(round, trials[j].c.model, calibration)) {
       stop(trials[j].c, "not judged", "", "passes every rule, but" + tie + " and neither leaves the model consistent");
       continue;
@@ -1146,8 +1155,7 @@ TailsVerdict tails_verdict(const Candidate& best, const Candidate& rival, bool b
   const TailsTest& h = best_heavy ? best_tails : rival_tails;
   const TailsTest& g = best_heavy ? rival_tails : best_tails;
   TailsVerdict v;
-  v.words = " the likelihood cannot tell " + best.effect + " from " + rival.effect + " (Vuong z = " +
-            format_number(z, "%.2f") + ")";
+  v.words = tie_words(best, rival, z);
   if (!h.valid || !g.valid) {
     v.words += ", and the tails cannot either (a model's world could not be simulated)";
     return v;
@@ -1187,13 +1195,12 @@ std::size_t prefer_by_tails(Round& round, std::vector<Trial>& trials, std::size_
   if (trials[best].c.systematic) return best;
   const bool best_heavy = heavy_tailed(trials[best]);
   const double alpha = round.before.alpha;
-  const double z_alpha = boost::math::quantile(boost::math::complement(boost::math::normal(), 0.5 * alpha));
   std::optional<TailsTest> best_tails;
   for (std::size_t j = best + 1; j < trials.size() && trials[j].c.significant; ++j) {
     Trial& rival = trials[j];
     const bool other_shape = !rival.c.systematic && heavy_tailed(rival) != best_heavy && rival.c.decision.empty();
     const double z = other_shape ? vuong_z(round, trials[best], rival) : kInfinity;
-    if (!(std::abs(z) < z_alpha)) continue;
+    if (!likelihood_ties(z, alpha)) continue;
     round.check_cancel();
     if (!best_tails) best_tails = tails_of(round, trials[best].c);
     if (!best_tails->valid) return best;
