@@ -45,7 +45,15 @@ void check_options(const CalibrateCliOptions& opt) {
   if (!opt.json.empty()) check_output_path(opt.json);
 }
 
+/// The longest --train/--test pattern: ample for experiment names, and far below the nesting
+/// at which std::regex's recursive compiler overflows the stack (about 30 000 parentheses).
+constexpr std::size_t kMaxPatternLength = 1000;
+
 std::regex regex_of(const std::string& option, const std::string& text) {
+  if (text.size() > kMaxPatternLength) {
+    throw UsageError(option + ": a regular expression of at most " + std::to_string(kMaxPatternLength) +
+                     " characters, got " + std::to_string(text.size()));
+  }
   try {
     return std::regex(text);
   } catch (const std::regex_error& e) {
