@@ -885,17 +885,6 @@ std::vector<double> replicate_b2(const Suite& suite, const SuiteModel& model, co
 
 }  // namespace
 
-double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
-                          const std::vector<std::vector<RunResidual>>& residuals,
-                          std::int64_t replicates, std::uint64_t seed) {
-  const Prepared p = prepare(residuals);
-  const std::vector<std::uint8_t> pooled = pooled_experiments(p);
-  if (std::find(pooled.begin(), pooled.end(), 1) == pooled.end()) return kNaN;
-  double mean = 0.0;
-  for (double v : replicate_b2(suite, model, p, pooled, replicates, seed)) mean += v / static_cast<double>(replicates);
-  return mean;
-}
-
 TailsTest tails_test(const Suite& suite, const SuiteModel& model,
                      const std::vector<std::vector<RunResidual>>& residuals, int replicates, std::uint64_t seed) {
   TailsTest out;
@@ -917,8 +906,12 @@ TailsTest tails_test(const Suite& suite, const SuiteModel& model,
     return out;
   }
   out.b2 = data.b2();
+  out.gaussian = data.expected_sum / data.weight;
   int above = 0, below = 0;
-  for (double v : b2) above += v >= out.b2, below += v <= out.b2;
+  for (double v : b2) {
+    above += v >= out.b2, below += v <= out.b2;
+    out.mean += v / static_cast<double>(replicates);
+  }
   std::nth_element(b2.begin(), b2.begin() + replicates / 2, b2.end());
   out.model = b2[static_cast<std::size_t>(replicates / 2)];
   out.p_value = std::min(1.0, 2.0 * (1.0 + std::min(above, below)) / (1.0 + replicates));

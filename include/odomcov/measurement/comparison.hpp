@@ -163,13 +163,6 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
                    const std::vector<std::vector<RunResidual>>& residuals,
                    const CalibrationOptions& calibration = {});
 
-/// The pooled Mardia kurtosis b2 that compare computes, averaged over `replicates` replicates of
-/// the model's own world (ModelWorld, seeded): the tails the model predicts for the suite. NaN
-/// when no experiment has kMinRunsForLrt (10) runs.
-double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
-                          const std::vector<std::vector<RunResidual>>& residuals,
-                          std::int64_t replicates, std::uint64_t seed);
-
 /// The data's tails against the model's own world, for a decision that compare's kurtosis test
 /// cannot make (it pools only experiments of kMinRunsForLrt runs or more, and a lab of a few runs
 /// per session has none): Mardia's b2 pooled as compare pools it, run-weighted, over every
@@ -181,10 +174,12 @@ double simulated_kurtosis(const Suite& suite, const SuiteModel& model,
 /// model's own (bumps that the data do not show, or tails beyond a Gaussian model's). Not valid
 /// when no experiment qualifies or the model's effects cannot be simulated.
 struct TailsTest {
-  double b2 = 0.0;       // the data's pooled b2
-  double model = 0.0;    // its median in the model's world
-  double p_value = 1.0;  // two-sided
-  int experiments = 0;   // pooled
+  double b2 = 0.0;        // the data's pooled b2
+  double model = 0.0;     // its median in the model's world
+  double mean = 0.0;      // its mean in the model's world
+  double gaussian = 0.0;  // its expectation for Gaussian errors (Mardia's exact moments)
+  double p_value = 1.0;   // two-sided
+  int experiments = 0;    // pooled
   bool valid = false;
 };
 TailsTest tails_test(const Suite& suite, const SuiteModel& model,
