@@ -31,7 +31,12 @@
 # bumps candidate matched over every experiment of five runs or more, before the rules judge them,
 # came from world 101 of 23122026 and was checked on the mixed batches 15122026, 27112026 and
 # 8122026; then every batch was rerun with new seeds: mixed 28122026, none 29122027, group
-# 30122026, open 1012028.
+# 30122026, open 1012028. The overdispersed-mean rule's scaling of each experiment's covariance
+# by the scatter of its own runs came from worlds 19 and 26 of the open batch 1012028 (a scale
+# error beside a noise that grows with speed) and was checked on the mixed batches 23122026,
+# 27112026, 15122026, 8122026 and 28122026, the none batch 29122027 and the group batch
+# 30122026; then every batch was rerun with new seeds: mixed 4012028, none 5012028, group
+# 6012028, open 2012028.
 #   scripts/diagnose_rates.sh            # the four batches
 #   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, or pilot (16 worlds)
 set -euo pipefail
@@ -50,9 +55,9 @@ run() {  # name seed worlds cases
     --seed "$2" --worlds "$3" --cases "$4" --out "$work/$1" --report "$out/$1.json" > "$out/$1.txt"
   echo "runtime: $((SECONDS - start)) s for $3 worlds on $(nproc) cores" >> "$out/$1.txt"
 }
-if want mixed; then run mixed 28122026 112 mixed; fi
-if want none; then run none 29122027 200 none; fi
-if want group; then run group 30122026 60 group; fi
-if want open; then run open 1012028 28 open; fi
+if want mixed; then run mixed 4012028 112 mixed; fi
+if want none; then run none 5012028 200 none; fi
+if want group; then run group 6012028 60 group; fi
+if want open; then run open 2012028 28 open; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2

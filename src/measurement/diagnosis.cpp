@@ -270,6 +270,50 @@ MeanDispersion mean_dispersion(const std::vector<std::vector<RunResidual>>& resi
   return {std::max(1.0, pearson / dof), dof};
 }
 
+/// How far each experiment's runs scatter about their own mean beyond what the model predicts
+/// for them: phi_e = sum_i d_i' Sigma_i^-1 d_i / (3 (n - 1)) over its n runs, d_i the run's
+/// residual (conditioned on the earlier runs of its group) less their mean over the experiment,
+/// at least 1 (1 for an experiment of one run). Under a Gaussian model it is independent of the
+/// experiment's mean error, whose variance it scales when the model's covariance is too small
+/// there (noise that grows with speed, slip on some paths): the within-experiment estimate of
+/// the quasi-likelihood's dispersion, one per experiment [McCullagh89, §9.2].
+std::vector<double> scatter_ratios(const std::vector<std::vector<RunResidual>>& residuals) {
+  std::vector<double> ratio;
+  for (const std::vector<RunResidual>& runs : condition_on_groups(residuals)) {
+    ratio.push_back(1.0);
+    if (runs.size() < 2) continue;
+    Vector3 mean = Vector3::Zero();
+    for (const RunResidual& x : runs) mean += (x.error - x.mean) / static_cast<double>(runs.size());
+    double pearson = 0.0;
+    bool whitened = true;
+    for (const RunResidual& x : runs) {
+      const Eigen::LDLT<Matrix3> ldlt(x.cov);
+      const Vector3 d = x.error - x.mean - mean;
+      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0) || !d.allFinite()) {
+        whitened = false;
+        break;
+      }
+      pearson += d.dot(ldlt.solve(d));
+    }
+    if (whitened) ratio.back() = std::max(1.0, pearson / (3.0 * static_cast<double>(runs.size() - 1)));
+  }
+  return ratio;
+}
+
+/// The residuals with each experiment's covariance, its group columns' part included, scaled
+/// by its scatter ratio.
+std::vector<std::vector<RunResidual>> inflated(std::vector<std::vector<RunResidual>> residuals,
+                                               const std::vector<double>& ratio) {
+  for (std::size_t e = 0; e < residuals.size(); ++e) {
+    for (RunResidual& x : residuals[e]) {
+      x.cov *= ratio[e];
+      x.group_column *= std::sqrt(ratio[e]);
+      x.group_column2 *= std::sqrt(ratio[e]);
+    }
+  }
+  return residuals;
+}
+
 /// Folds with the base's fits on them (its own effects of each kind refitted on each fold's
 /// training runs), computed once per round when first needed.
 struct FoldSet {
@@ -301,6 +345,14 @@ struct Round {
   SuiteModel base;
   double base_full = 0.0, base_scatter = 0.0;
   std::vector<double> base_by_experiment;
+  /// The base's residuals with each experiment's covariance scaled by the scatter of its own
+  /// runs (scatter_ratios; the largest ratio and its experiment), and their log-likelihood: the
+  /// base against which a systematic candidate's gain in the mean is judged as a quasi-likelihood
+  /// (overdispersed).
+  std::vector<std::vector<RunResidual>> base_inflated;
+  double base_inflated_log_likelihood = 0.0;
+  double max_scatter_ratio = 1.0;
+  std::string max_scatter_experiment;
   FoldSet folds;   // the suite's (make_folds)
   FoldSet within;  // K folds over the experiments (experiment_folds), every kind in training
   FoldSet across;  // the halves of the base's mean feature (feature_folds), once it is known
@@ -328,11 +380,21 @@ struct Round {
 Round start_round(const Suite& suite, const SuiteModel& model, const Comparison& before,
                   bool heavy_tails, DiagnoseProgress* progress, FitPath path, ResidualCache& cache) {
   Round round{suite, before, heavy_tails, progress, path, cache, split_fitted_names(model.effects),
-              refit(suite, model, progress, path, cache).model, 0.0, 0.0, {}, {}, {}, {}, {}, false, {}, {}, {}, {}};
+              refit(suite, model, progress, path, cache).model, 0.0, 0.0, {}, {}, 0.0, 1.0, {}, {}, {}, {}, {}, false,
+              {}, {}, {}, {}};
   const auto& base_residuals = cache.at(round.base);
   round.base_full = log_likelihood(base_residuals);
   round.base_scatter = scatter_log_likelihood(base_residuals);
   round.base_by_experiment = experiment_log_likelihoods(base_residuals);
+  const std::vector<double> ratio = scatter_ratios(base_residuals);
+  round.base_inflated = inflated(base_residuals, ratio);
+  round.base_inflated_log_likelihood = log_likelihood(round.base_inflated);
+  for (std::size_t e = 0; e < ratio.size(); ++e) {
+    if (ratio[e] > round.max_scatter_ratio) {
+      round.max_scatter_ratio = ratio[e];
+      round.max_scatter_experiment = suite.experiments[e].name;
+    }
+  }
   return round;
 }
 
@@ -380,6 +442,9 @@ struct Trial {
   SuiteModel start;
   FitResult fit;
   Candidate c;
+  /// A systematic candidate's gain in the mean against the base's residuals with each
+  /// experiment's covariance scaled by the scatter of its own runs (Round::base_inflated).
+  double mean_gain_inflated = kNaN;
 };
 
 /// Fits one candidate on the base with the nuisance parameters of its kind (the fit path of
@@ -473,10 +538,12 @@ void judge_in_sample(const Round& round, Trial& t, double log_runs) {
     const auto& base = round.cache.at(round.base);
     c.delta_mean_log_likelihood = log_likelihood(with_means(candidate_residuals, base)) - log_likelihood(base);
     c.mean_p_value = lrt_p_value(c.delta_mean_log_likelihood, c.dof, type.on_boundary);
+    const auto candidate_inflated = with_means(candidate_residuals, round.base_inflated);
+    t.mean_gain_inflated = log_likelihood(candidate_inflated) - round.base_inflated_log_likelihood;
     const MeanDispersion d =
-        mean_dispersion(with_means(candidate_residuals, base), round.nuisance.systematic.size() + type.fitted.size());
+        mean_dispersion(candidate_inflated, round.nuisance.systematic.size() + type.fitted.size());
     c.mean_dispersion = d.phi;
-    c.mean_p_value_dispersed = mean_p_value(c.delta_mean_log_likelihood, c.dof, type.on_boundary, d);
+    c.mean_p_value_dispersed = mean_p_value(t.mean_gain_inflated, c.dof, type.on_boundary, d);
   }
   confounding(t.fit, t.fitted.size() - type.fitted.size(), c);
 }
@@ -917,7 +984,7 @@ const MeanDispersion& full_model_dispersion(Round& round) {
     round.check_cancel();
     const FitResult r = fit(round.suite, round.full, round.full_names, Likelihood::full, round.counter(),
                             round.path, &round.cache);
-    d = mean_dispersion(with_means(round.cache.at(r.model), round.cache.at(round.base)), round.full_names.size());
+    d = mean_dispersion(with_means(round.cache.at(r.model), round.base_inflated), round.full_names.size());
   } catch (const Cancelled&) {
     throw;
   } catch (const std::exception&) {
@@ -927,7 +994,8 @@ const MeanDispersion& full_model_dispersion(Round& round) {
   return *(round.full_dispersion = d);
 }
 
-/// The overdispersed-mean rule: the candidate's gain in the mean stays significant at the
+/// The overdispersed-mean rule: the candidate's gain in the mean, each experiment's covariance
+/// scaled by the scatter of its own runs (Round::base_inflated), stays significant at the
 /// family-wise alpha against the scatter of the experiments' means that its own model leaves,
 /// or failing that, the round's full model (plan_full_model; its dispersion replaces the
 /// candidate's in the report when it is the smaller). When the full model has no degrees of
@@ -942,7 +1010,7 @@ bool overdispersed(Round& round, Trial& t) {
   }
   if (full.phi < c.mean_dispersion) {
     c.mean_dispersion = full.phi;
-    c.mean_p_value_dispersed = mean_p_value(c.delta_mean_log_likelihood, c.dof, t.type->on_boundary, full);
+    c.mean_p_value_dispersed = mean_p_value(t.mean_gain_inflated, c.dof, t.type->on_boundary, full);
   }
   return !(c.mean_p_value_dispersed < round.before.alpha);
 }
@@ -970,12 +1038,20 @@ bool passes_in_sample(Round& round, Trial& t, double per_candidate) {
                     "); its gain comes from the covariance it inflates, not from the mean it should explain");
   }
   if (overdispersed(round, t)) {
+    const std::string runs =
+        round.max_scatter_ratio > 1.0
+            ? "each experiment's runs scatter up to " + format_number(round.max_scatter_ratio, "%.3g") +
+                  " times as much as the model predicts (" + round.max_scatter_experiment +
+                  (c.mean_dispersion > 1.0 ? "), and with it the experiments' mean errors scatter " +
+                                                 format_number(c.mean_dispersion, "%.3g") + " times as much as that"
+                                           : "), and with it the experiments' mean errors scatter no more than that")
+            : "with it the experiments' mean errors still scatter " + format_number(c.mean_dispersion, "%.3g") +
+                  " times as much as the model predicts";
     return stop(c, "stopped", "overdispersed mean",
                 "not adopted: its predicted means gain " + format_number(c.delta_mean_log_likelihood, "%.3g") +
                     " in log-likelihood (p = " + format_number(c.mean_p_value, "%.2g") +
-                    " were the model's covariances right), but with it the experiments' mean errors still scatter " +
-                    format_number(c.mean_dispersion, "%.3g") +
-                    " times as much as the model predicts, and against that scatter the gain is not significant (p = " +
+                    " were the model's covariances right), but " + runs +
+                    ", and against that scatter the gain is not significant (p = " +
                     format_number(c.mean_p_value_dispersed, "%.2g") +
                     "): it fits a little of a misfit that it does not explain");
   }

@@ -133,8 +133,10 @@ struct Candidate {
   double delta_mean_log_likelihood = std::numeric_limits<double>::quiet_NaN();
   double mean_p_value = std::numeric_limits<double>::quiet_NaN();
   /// How far the experiments' mean errors scatter, with the candidate in, beyond what the model
-  /// predicts (the quasi-likelihood dispersion, at least 1), and that gain's p-value against it
-  /// (the F test; the likelihood ratio's when it is 1). NaN where mean_p_value is.
+  /// predicts once each experiment's covariance is scaled by the scatter of its own runs (the
+  /// quasi-likelihood dispersion, at least 1), and the gain's p-value against both (the F test
+  /// of the gain under the scaled covariances; the likelihood ratio's when phi is 1). NaN where
+  /// mean_p_value is.
   double mean_dispersion = std::numeric_limits<double>::quiet_NaN();
   double mean_p_value_dispersed = std::numeric_limits<double>::quiet_NaN();
   /// The gain in held-out log-likelihood over the base (its part of the likelihood), summed
