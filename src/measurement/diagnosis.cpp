@@ -559,15 +559,14 @@ void rank_trials(std::vector<Trial>& trials, double alpha) {
   std::stable_sort(trials.begin(), trials.end(), [&](const Trial& a, const Trial& b) {
     return a.c.significant != b.c.significant ? a.c.significant : a.c.delta_bic < b.c.delta_bic;
   });
-  
 }
 
 /// The start of match_tails' notes.
 constexpr const char* kTailsNote = "the impulse size ";
 
 /// Simulated replicates per step of match_tails, and its steps at most.
-constexpr int kTailReplicates = 49;
-constexpr int kTailSteps = 4;
+constexpr int kMatchReplicates = 49;
+constexpr int kMatchSteps = 4;
 
 /// A heavy-tailed effect (EffectInfo::rescale_tails, bumps) whose tails the Gaussian likelihood
 /// cannot see: its impulse size is set so that the model's own simulated world has the data's
@@ -588,8 +587,8 @@ std::string match_tails(const Suite& suite, SuiteModel& model, const std::string
   const std::vector<std::vector<RunResidual>> res = cache.at(model);
   const std::vector<double> start = spec->values;
   bool rescaled = false;
-  for (int step = 0; step < kTailSteps; ++step) {
-    const TailsTest t = tails_test(suite, model, res, kTailReplicates, seed);
+  for (int step = 0; step < kMatchSteps; ++step) {
+    const TailsTest t = tails_test(suite, model, res, kMatchReplicates, seed);
     const double excess = t.b2 - t.gaussian, model_excess = t.mean - t.gaussian;
     if (!t.valid || !(excess > 0) || !(model_excess > 0)) break;
     const double factor = std::clamp(std::sqrt(excess / model_excess), 0.1, 10.0);
@@ -598,7 +597,7 @@ std::string match_tails(const Suite& suite, SuiteModel& model, const std::string
     if (std::abs(factor - 1.0) < 0.02) break;
   }
   if (!rescaled) return "";
-  const TailsTest t = tails_test(suite, model, res, kTailReplicates, seed);  // at the size reached
+  const TailsTest t = tails_test(suite, model, res, kMatchReplicates, seed);  // at the size reached
   const std::string b2 = format_number(t.b2, "%.3g");
   if (!t.valid || t.model - t.gaussian < 0.5 * (t.b2 - t.gaussian)) {
     spec->values = start;
