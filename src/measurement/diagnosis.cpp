@@ -1070,8 +1070,12 @@ bool passes_held_out(Round& round, Trial& t) {
     used = &round.within.folds;
     cross_validate(round, round.within, t);
   }
-  const bool loses_a_fold = std::any_of(c.held_out_by_fold.begin(), c.held_out_by_fold.end(), [](const Candidate::FoldGain& g) {
-    return (g.counted && g.gain < -kMaxFoldLoss) || g.contradicts;
+  // A fold's loss is on the quasi-likelihood's scale: where the experiments' means scatter phi
+  // times as much as the model predicts (mean_dispersion, a systematic candidate's), a loss of
+  // phi kMaxFoldLoss weighs what kMaxFoldLoss would under a right covariance [McCullagh89, §9.3].
+  const double phi = std::isfinite(c.mean_dispersion) ? std::max(1.0, c.mean_dispersion) : 1.0;
+  const bool loses_a_fold = std::any_of(c.held_out_by_fold.begin(), c.held_out_by_fold.end(), [&](const Candidate::FoldGain& g) {
+    return (g.counted && g.gain < -kMaxFoldLoss * phi) || g.contradicts;
   });
   if (c.delta_held_out <= 0 || loses_a_fold) return stop(c, "mimic", "held-out likelihood", mimic_text(t, *used));
   if (judged_on_mean(t, c.model)) {
@@ -1088,9 +1092,9 @@ bool passes_held_out(Round& round, Trial& t) {
 ///     level, and stays significant at the family-wise level against the scatter of the
 ///     experiments' means that its model, or the round's full model, still leaves
 ///     (mean_dispersion, overdispersed);
-///  3. it predicts the held-out folds better than the base (else it is a mimic), and a
-///     candidate judged on the mean also predicts across the base's mean feature
-///     (across_feature);
+///  3. it predicts the held-out folds better than the base, and no fold worse by more than
+///     kMaxFoldLoss times its mean dispersion (else it is a mimic), and a candidate judged on
+///     the mean also predicts across the base's mean feature (across_feature);
 ///  4. its adopted model (everything refitted) has no parameter at a bound;
 ///  5. a random candidate explains the spread it is judged on: the runs' errors about their
 ///     experiment's mean do not follow their start heading (run_by_run), and the scatter's

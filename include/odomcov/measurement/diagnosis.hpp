@@ -67,7 +67,9 @@ inline constexpr double kMinFoldSignal = 2.0;
 /// A candidate predicts a fold worse when its held-out gain there is below minus this (the
 /// same e^2 evidence as kMinFoldSignal, against it): an effect that helps some kinds of path
 /// and hurts another is a compromise between them, not their cause, and it is a mimic even
-/// when its gains elsewhere outweigh the loss.
+/// when its gains elsewhere outweigh the loss. On the quasi-likelihood's scale: a systematic
+/// candidate whose model leaves the experiments' means dispersed phi times the predicted
+/// (Candidate::mean_dispersion) may lose phi times this.
 inline constexpr double kMaxFoldLoss = 2.0;
 
 /// A fold that holds nearly all the information about a candidate (stderr_ratio r > 3) is not
@@ -163,7 +165,7 @@ struct Candidate {
   };
   std::vector<FoldGain> held_out_by_fold;
   /// "adopted"; "mimic" (significant in-sample, predicts the held-out folds worse in all, one of
-  /// them worse by more than kMaxFoldLoss, or a fold that could not test it worse than its
+  /// them worse by more than kMaxFoldLoss on the quasi-likelihood's scale, or a fold that could not test it worse than its
   /// uncertainty explains); "stopped"
   /// (significant, but a guard stopped it: `rule`); "not significant"; "not judged"
   /// (significant, ranked after the adopted one).
