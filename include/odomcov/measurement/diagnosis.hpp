@@ -165,10 +165,10 @@ struct Candidate {
   };
   std::vector<FoldGain> held_out_by_fold;
   /// "adopted"; "mimic" (significant in-sample, predicts the held-out folds worse in all, one of
-  /// them worse by more than kMaxFoldLoss on the quasi-likelihood's scale, or a fold that could not test it worse than its
-  /// uncertainty explains); "stopped"
-  /// (significant, but a guard stopped it: `rule`); "not significant"; "not judged"
-  /// (significant, ranked after the adopted one).
+  /// them worse by more than kMaxFoldLoss on the quasi-likelihood's scale, or a fold that could
+  /// not test it worse than its uncertainty explains); "stopped" (significant, but a guard
+  /// stopped it: `rule`); "not significant"; "not judged" (significant, ranked after the
+  /// adopted one).
   std::string verdict = "not significant";
   /// The rule that stopped a stopped candidate or named a mimic: "parameter at bound",
   /// "confounded", "covariance, not mean", "held-out likelihood", "across the feature" (a
