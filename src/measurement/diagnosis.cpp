@@ -271,31 +271,21 @@ MeanDispersion mean_dispersion(const std::vector<std::vector<RunResidual>>& resi
 }
 
 /// How far each experiment's runs scatter about their own mean beyond what the model predicts
-/// for them: phi_e = sum_i d_i' Sigma_i^-1 d_i / (3 (n - 1)) over its n runs, d_i the run's
-/// residual (conditioned on the earlier runs of its group) less their mean over the experiment,
-/// at least 1 (1 for an experiment of one run). Under a Gaussian model it is independent of the
-/// experiment's mean error, whose variance it scales when the model's covariance is too small
-/// there (noise that grows with speed, slip on some paths): the within-experiment estimate of
-/// the quasi-likelihood's dispersion, one per experiment [McCullagh89, §9.2].
+/// for them: phi_e, the Pearson statistic of its runs about their own mean over its expectation
+/// (scatter_ratio; 3 (n - 1) for runs that share one covariance), each run conditioned on the
+/// earlier runs of its group, at least 1 (1 for an experiment of one run). Under a Gaussian
+/// model it is independent of the experiment's mean error, whose variance it scales when the
+/// model's covariance is too small there (noise that grows with speed, slip on some paths): the
+/// within-experiment estimate of the quasi-likelihood's dispersion, one per experiment
+/// [McCullagh89, §9.2].
 std::vector<double> scatter_ratios(const std::vector<std::vector<RunResidual>>& residuals) {
   std::vector<double> ratio;
+  std::vector<Vector3> r;
+  std::vector<Matrix3> cov;
   for (const std::vector<RunResidual>& runs : condition_on_groups(residuals)) {
-    ratio.push_back(1.0);
-    if (runs.size() < 2) continue;
-    Vector3 mean = Vector3::Zero();
-    for (const RunResidual& x : runs) mean += (x.error - x.mean) / static_cast<double>(runs.size());
-    double pearson = 0.0;
-    bool whitened = true;
-    for (const RunResidual& x : runs) {
-      const Eigen::LDLT<Matrix3> ldlt(x.cov);
-      const Vector3 d = x.error - x.mean - mean;
-      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0) || !d.allFinite()) {
-        whitened = false;
-        break;
-      }
-      pearson += d.dot(ldlt.solve(d));
-    }
-    if (whitened) ratio.back() = std::max(1.0, pearson / (3.0 * static_cast<double>(runs.size() - 1)));
+    r.clear(), cov.clear();
+    for (const RunResidual& x : runs) r.push_back(x.error - x.mean), cov.push_back(x.cov);
+    ratio.push_back(std::max(1.0, scatter_ratio(r, cov).value_or(1.0)));
   }
   return ratio;
 }

@@ -244,5 +244,25 @@ double scatter_log_likelihood(const std::vector<std::vector<RunResidual>>& res) 
   return sum;
 }
 
+std::optional<double> scatter_ratio(const std::vector<Vector3>& r, const std::vector<Matrix3>& cov) {
+  const std::size_t n = r.size();
+  if (n < 2 || cov.size() != n) return std::nullopt;
+  const double nd = static_cast<double>(n);
+  Vector3 mean = Vector3::Zero();
+  Matrix3 cov_mean = Matrix3::Zero();
+  for (std::size_t i = 0; i < n; ++i) mean += r[i] / nd, cov_mean += cov[i] / nd;
+  double w = 0.0, expected = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::LDLT<Matrix3> ldlt(cov[i]);
+    const Vector3 d = r[i] - mean;
+    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0) || !d.allFinite()) {
+      return std::nullopt;
+    }
+    w += d.dot(ldlt.solve(d));
+    expected += kDim * (1.0 - 2.0 / nd) + ldlt.solve(cov_mean).trace() / nd;
+  }
+  if (!(expected > 0)) return std::nullopt;
+  return w / expected;
+}
 
 }  // namespace odomcov

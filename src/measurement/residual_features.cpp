@@ -357,26 +357,14 @@ bool headings_differ(const SuiteExperiment& ex) {
 }
 
 /// The scatter part of an experiment (see residual_alignment): W_e = sum d_i' Sigma_i^-1 d_i
-/// with d_i the end-frame residuals about their own mean, over its expectation under the model;
-/// shape 0 (no scatter part) for a lone run or a covariance that cannot be inverted.
+/// with d_i the end-frame residuals about their own mean, over its expectation under the model
+/// (scatter_ratio); shape 0 (no scatter part) for a lone run, a covariance that cannot be
+/// inverted or no scatter at all.
 void experiment_scatter(const std::vector<Vector3>& r, const std::vector<Matrix3>& cov, ExperimentMean& m) {
-  const std::size_t n = r.size();
-  if (n < 2) return;
-  const double nd = static_cast<double>(n);
-  Vector3 mean = Vector3::Zero();
-  Matrix3 cov_mean = Matrix3::Zero();
-  for (std::size_t i = 0; i < n; ++i) mean += r[i] / nd, cov_mean += cov[i] / nd;
-  double w = 0.0, expected = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::LDLT<Matrix3> ldlt(cov[i]);
-    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return;
-    const Vector3 d = r[i] - mean;
-    w += d.dot(ldlt.solve(d));
-    expected += kDim * (1.0 - 2.0 / nd) + ldlt.solve(cov_mean).trace() / nd;
-  }
-  if (!(w > 0) || !(expected > 0)) return;
-  m.scatter = w / expected;
-  m.shape = 0.5 * kDim * (nd - 1.0);
+  const std::optional<double> ratio = scatter_ratio(r, cov);
+  if (!ratio || !(*ratio > 0)) return;
+  m.scatter = *ratio;
+  m.shape = 0.5 * kDim * (static_cast<double>(r.size()) - 1.0);
 }
 
 /// Experiment e's mean residual, its sensitivities to the factor directions (from the nudged

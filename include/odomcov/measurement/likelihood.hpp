@@ -2,6 +2,7 @@
 // covariance (measurement noise included), and the Gaussian log-likelihood and its scatter part.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -88,5 +89,12 @@ double log_likelihood(const std::vector<std::vector<RunResidual>>& residuals);
 /// Group columns do not enter either: a group's shared offset moves an experiment's runs
 /// together, which the experiment's own mean removes (exactly when the runs share one path).
 double scatter_log_likelihood(const std::vector<std::vector<RunResidual>>& residuals);
+
+/// How far n residuals r_i scatter about their own mean beyond what their covariances Sigma_i
+/// predict: W = sum_i d_i' Sigma_i^-1 d_i (d_i = r_i - r_bar) over its expectation under the
+/// model, sum_i [3 (1 - 2/n) + tr(Sigma_i^-1 Sigma_bar) / n] with Sigma_bar the mean covariance
+/// (3 (n - 1) when the runs share one covariance). Nothing for fewer than two runs, a covariance
+/// that is not positive definite or a residual that is not finite.
+std::optional<double> scatter_ratio(const std::vector<Vector3>& r, const std::vector<Matrix3>& cov);
 
 }  // namespace odomcov
