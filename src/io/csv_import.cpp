@@ -8,6 +8,7 @@
 #include <set>
 
 #include "io/csv.hpp"
+#include "io/wheel_log.hpp"
 #include "odomcov/base/error.hpp"
 #include "odomcov/base/format.hpp"
 
@@ -23,12 +24,6 @@ struct ReferenceSample {
   double t = 0;
   Vector3 pose = Vector3::Zero();  // world frame of the reference, theta unwrapped
   int line = 0;
-};
-struct InputRow {
-  double t = 0;
-  bool wheels = false, reference = false;
-  double left = 0, right = 0;
-  Vector3 pose = Vector3::Zero();
 };
 
 struct ConvertedRun {
@@ -78,48 +73,27 @@ std::string number(double v) { return format_number(v, "%.17g"); }
 
 /// A log's rows, read and checked, and the wheel readings and reference poses among them.
 struct InputLog {
-  std::vector<InputRow> rows;
+  std::vector<wheel_log::Row> rows;  // theta unwrapped
   std::vector<WheelSample> wheels;     // scaled to metres
   std::vector<ReferenceSample> refs;   // theta unwrapped
   int last_line = 0;                   // of the file's last row
 };
 
-/// Reads one row into `log`: time strictly increasing, both wheels or neither, the reference
-/// pose complete or absent, and not both absent.
-void read_row(const std::string& file, const csv::Row& row, const CsvImportOptions& o, InputLog& log) {
-  InputRow in;
-  in.t = row.number(0);
-  if (!log.rows.empty() && !(in.t > log.rows.back().t)) {
-    csv::fail(file, row.line, "t", "time must increase strictly");
-  }
-  const bool has_left = !row.empty(1), has_right = !row.empty(2);
-  if (has_left != has_right) csv::fail(file, row.line, "left,right", "give both wheels or neither");
-  const bool has_x = !row.empty(3), has_y = !row.empty(4), has_theta = !row.empty(5);
-  if (!(has_x == has_y && has_y == has_theta)) {
-    csv::fail(file, row.line, "x,y,theta", "a reference pose needs all of x, y and theta");
-  }
-  if (!has_left && !has_x) csv::fail(file, row.line, "left,right,x,y,theta", "the row is empty");
-  if (has_left) {
-    in.wheels = true;
-    in.left = o.left_scale * row.number(1);
-    in.right = o.right_scale * row.number(2);
-    log.wheels.push_back({in.t, in.left, in.right});
-  }
-  if (has_x) {
-    in.reference = true;
-    double theta = row.number(5);
-    if (!log.refs.empty()) theta = log.refs.back().pose.z() + wrap_angle(theta - log.refs.back().pose.z());
-    in.pose = {row.number(3), row.number(4), theta};
-    log.refs.push_back({in.t, in.pose, row.line});
-  }
-  log.rows.push_back(in);
-}
-
-/// Reads and checks every row of a log file (columns t,left,right,x,y,theta).
+/// Reads and checks every row of a log file (columns t,left,right,x,y,theta; wheel_log::read):
+/// each row gives the wheels, the reference pose or both; theta is unwrapped.
 InputLog read_log(const std::string& file, const CsvImportOptions& o) {
   const csv::Table table = csv::read(file, {"t", "left", "right", "x", "y", "theta"});
   InputLog log;
-  for (const csv::Row& row : table.rows) read_row(file, row, o, log);
+  for (const wheel_log::Row& row : wheel_log::read(file, table, wheel_log::Origin::first_row, o.left_scale, o.right_scale)) {
+    if (!row.wheels && !row.reference) csv::fail(file, row.line, "left,right,x,y,theta", "the row is empty");
+    wheel_log::Row in = row;
+    if (row.wheels) log.wheels.push_back({in.t, in.left_m, in.right_m});
+    if (row.reference) {
+      if (!log.refs.empty()) in.pose.z() = log.refs.back().pose.z() + wrap_angle(in.pose.z() - log.refs.back().pose.z());
+      log.refs.push_back({in.t, in.pose, row.line});
+    }
+    log.rows.push_back(in);
+  }
   log.last_line = table.rows.back().line;
   return log;
 }
@@ -167,9 +141,9 @@ ConvertedRun write_run(const InputLog& log, double t_start, double t_end, const 
   Vector3 counted = Vector3::Zero();  // last reference pose counted into the travel
   Vector3 last_ref = Vector3::Zero();
   const double half_b = 0.5 * o.wheelbase_m;
-  for (const InputRow& in : log.rows) {
+  for (const wheel_log::Row& in : log.rows) {
     if (!(in.t > t_start) || in.t > t_end) continue;
-    const WheelSample w = in.wheels ? WheelSample{in.t, in.left, in.right} : wheels_at(log.wheels, in.t);
+    const WheelSample w = in.wheels ? WheelSample{in.t, in.left_m, in.right_m} : wheels_at(log.wheels, in.t);
     const double left = w.left - w0.left, right = w.right - w0.right;
     out.encoder_travel_m += 0.5 * (std::abs(left - left_prev) + std::abs(right - right_prev));
     left_prev = left;
@@ -318,14 +292,11 @@ EncoderLog load_encoder_log(const std::string& file, double left_scale, double r
   // A suite's log may end with heading0 (the start heading, first row): read and ignored here.
   const csv::Table table = columns.size() == 6 ? csv::read(file, columns, "heading0") : csv::read(file, columns);
   EncoderLog log;
-  for (const csv::Row& row : table.rows) {
-    const double t = row.number(0);
-    if (!log.t_s.empty() && !(t > log.t_s.back())) csv::fail(file, row.line, "t", "time must increase strictly");
-    if (row.empty(1) && row.empty(2)) continue;  // a reference-only row
-    if (row.empty(1) || row.empty(2)) csv::fail(file, row.line, "left,right", "give both wheels or neither");
-    log.t_s.push_back(t);
-    log.left_m.push_back(left_scale * row.number(1));
-    log.right_m.push_back(right_scale * row.number(2));
+  for (const wheel_log::Row& row : wheel_log::read(file, table, wheel_log::Origin::first_row, left_scale, right_scale)) {
+    if (!row.wheels) continue;  // a reference-only row
+    log.t_s.push_back(row.t);
+    log.left_m.push_back(row.left_m);
+    log.right_m.push_back(row.right_m);
   }
   if (log.t_s.empty()) csv::fail(file, table.rows.back().line, "left,right", "no wheel readings");
   const double l0 = log.left_m.front(), r0 = log.right_m.front();

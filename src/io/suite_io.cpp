@@ -7,6 +7,7 @@
 
 #include "io/config_yaml.hpp"
 #include "io/csv.hpp"
+#include "io/wheel_log.hpp"
 #include "odomcov/measurement/config.hpp"
 #include "odomcov/base/format.hpp"
 #include "odomcov/closed_form/limits.hpp"
@@ -19,16 +20,6 @@ namespace {
 
 using yaml::Where;
 
-
-/// A measured pose within the numeric domain (limits.hpp): positions and heading at most
-/// kMaxLength_m (the heading is wrapped, but 1e6 rad is no angle anyone measured).
-void check_pose(const std::string& file, const csv::Row& row, std::size_t first_column) {
-  for (std::size_t c = first_column; c < first_column + 3; ++c) {
-    if (const std::string e = limits::check_length(row.number(c)); !e.empty()) {
-      csv::fail(file, row.line, row.meta->columns[c], e);
-    }
-  }
-}
 
 /// The optional `heading0` cell of a row (column `c`): the run's start heading in the
 /// reference's frame [rad], a finite number at most kMaxTurn_rad in magnitude (limits.hpp).
@@ -51,7 +42,7 @@ std::vector<SuiteRun> load_measurements(const std::string& csv_file) {
       csv::fail(csv_file, row.line, "run", "duplicate run id " + quote(run.id));
     }
     run.measured = {row.number(1), row.number(2), row.number(3)};
-    check_pose(csv_file, row, 1);
+    wheel_log::check_pose(csv_file, row, 1);
     if (has_heading0) {
       run.heading0_rad = heading0_of(csv_file, row, 4);
       run.heading0_given = true;
@@ -81,30 +72,18 @@ SuiteRun load_log(const std::string& log_file) {
   SuiteRun run;
   run.id = std::filesystem::path(log_file).stem().string();
   read_log_heading0(log_file, table, run);
-  double t = 0, left = 0, right = 0;
+  const std::vector<wheel_log::Row> rows = wheel_log::read(log_file, table, wheel_log::Origin::zero);
   int reference_line = 0;
   std::size_t reference_pieces = 0;
-  for (std::size_t i = 0; i < table.rows.size(); ++i) {
-    const csv::Row& row = table.rows[i];
-    const double ti = row.number(0), li = row.number(1), ri = row.number(2);
-    for (std::size_t c : {1, 2}) {
-      if (const std::string e = limits::check_length(row.number(c)); !e.empty()) {
-        csv::fail(log_file, row.line, row.meta->columns[c], e);
-      }
-    }
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const wheel_log::Row& row = rows[i];
+    if (!row.wheels) csv::fail(log_file, row.line, "left", "empty cell");  // a suite's log has both on every row
     if (i > 0) {
-      if (!(ti > t)) csv::fail(log_file, row.line, "t", "time must increase strictly");
-      run.pieces.push_back({li - left, ri - right});
-      run.durations_s.push_back(ti - t);
+      run.pieces.push_back({row.left_m - rows[i - 1].left_m, row.right_m - rows[i - 1].right_m});
+      run.durations_s.push_back(row.t - rows[i - 1].t);
     }
-    t = ti, left = li, right = ri;
-    const bool has_x = !row.empty(3), has_y = !row.empty(4), has_theta = !row.empty(5);
-    if (has_x || has_y || has_theta) {
-      if (!(has_x && has_y && has_theta)) {
-        csv::fail(log_file, row.line, "x,y,theta", "a reference pose needs all of x, y and theta");
-      }
-      run.measured = {row.number(3), row.number(4), row.number(5)};
-      check_pose(log_file, row, 3);
+    if (row.reference) {
+      run.measured = row.pose;
       reference_line = row.line;
       reference_pieces = run.pieces.size();
     }
