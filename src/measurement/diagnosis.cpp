@@ -334,25 +334,25 @@ struct Round {
   FittedNames nuisance;
   SuiteModel base;
   double base_full = 0.0, base_scatter = 0.0;
-  std::vector<double> base_by_experiment;
+  std::vector<double> base_by_experiment = {};
   /// The base's residuals with each experiment's covariance scaled by the scatter of its own
   /// runs (scatter_ratios; the largest ratio and its experiment), and their log-likelihood: the
   /// base against which a systematic candidate's gain in the mean is judged as a quasi-likelihood
   /// (overdispersed).
-  std::vector<std::vector<RunResidual>> base_inflated;
+  std::vector<std::vector<RunResidual>> base_inflated = {};
   double base_inflated_log_likelihood = 0.0;
   double max_scatter_ratio = 1.0;
-  std::string max_scatter_experiment;
-  FoldSet folds;   // the suite's (make_folds)
-  FoldSet within;  // K folds over the experiments (experiment_folds), every kind in training
-  FoldSet across;  // the halves of the base's mean feature (feature_folds), once it is known
-  std::optional<ResidualAlignment> base_mean_feature;  // the base's, when significant (across_feature)
+  std::string max_scatter_experiment = {};
+  FoldSet folds = {};   // the suite's (make_folds)
+  FoldSet within = {};  // K folds over the experiments (experiment_folds), every kind in training
+  FoldSet across = {};  // the halves of the base's mean feature (feature_folds), once it is known
+  std::optional<ResidualAlignment> base_mean_feature = {};  // the base's, when significant (across_feature)
   bool base_mean_done = false;
   /// The round's full model (the base with every significant candidate judged on the mean) and
   /// the names it fits, fitted the first time a candidate needs it (full_model_dispersion).
-  SuiteModel full;
-  std::vector<std::string> full_names;
-  std::optional<MeanDispersion> full_dispersion;
+  SuiteModel full = {};
+  std::vector<std::string> full_names = {};
+  std::optional<MeanDispersion> full_dispersion = {};
   BaseFeature scatter_feature = {};  // the base's most significant scatter feature (scatter_shape)
   std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
   BaseFeature run_feature = {};  // the base's most significant run feature (run_by_run)
@@ -370,8 +370,7 @@ struct Round {
 Round start_round(const Suite& suite, const SuiteModel& model, const Comparison& before,
                   bool heavy_tails, DiagnoseProgress* progress, FitPath path, ResidualCache& cache) {
   Round round{suite, before, heavy_tails, progress, path, cache, split_fitted_names(model.effects),
-              refit(suite, model, progress, path, cache).model, 0.0, 0.0, {}, {}, 0.0, 1.0, {}, {}, {}, {}, {}, false,
-              {}, {}, {}, {}};
+              refit(suite, model, progress, path, cache).model};  // the rest as declared
   const auto& base_residuals = cache.at(round.base);
   round.base_full = log_likelihood(base_residuals);
   round.base_scatter = scatter_log_likelihood(base_residuals);
