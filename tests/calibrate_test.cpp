@@ -361,8 +361,8 @@ TEST(Diagnose, TheTailsDecideBetweenANoiseLevelAndBumps) {
     // shows them to the completion, which keeps its 5 mm start): closer to the true 10 mm.
     const Candidate& bumps = candidate(d, "bumps");
     std::printf("seed %llu: bumps sigma %.4g m (true 0.010), %s\n", static_cast<unsigned long long>(seed),
-                bumps.values[1], bumps.note.c_str());
-    EXPECT_NE(bumps.note.find("simulated method of moments"), std::string::npos) << bumps.note;
+                bumps.values[1], bumps.tails_note.c_str());
+    EXPECT_NE(bumps.tails_note.find("simulated method of moments"), std::string::npos) << bumps.tails_note;
     EXPECT_LT(std::abs(std::log(bumps.values[1] / 0.010)), std::log(2.0)) << seed;
   }
   std::printf("tails rule: decided against the ranking in %d of 4 labs\n", stopped);

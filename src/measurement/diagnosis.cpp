@@ -550,9 +550,6 @@ void rank_trials(std::vector<Trial>& trials, double alpha) {
   });
 }
 
-/// The start of match_tails' notes.
-constexpr const char* kTailsNote = "the impulse size ";
-
 /// Simulated replicates per step of match_tails, and its steps at most.
 constexpr int kMatchReplicates = 49;
 constexpr int kMatchSteps = 4;
@@ -590,12 +587,12 @@ std::string match_tails(const Suite& suite, SuiteModel& model, const std::string
   const std::string b2 = format_number(t.b2, "%.3g");
   if (!t.valid || t.model - t.gaussian < 0.5 * (t.b2 - t.gaussian)) {
     spec->values = start;
-    return kTailsNote + ("kept: the data's Mardia kurtosis, " + b2) + ", is more than " + effect +
+    return "the impulse size kept: the data's Mardia kurtosis, " + b2 + ", is more than " + effect +
            " carrying this share of the variance gives in a typical world of these runs (" +
            format_number(t.model, "%.3g") + " at the size that matches it on average)";
   }
-  return kTailsNote + ("then set so that the model's simulated world has the data's Mardia kurtosis, " + b2 +
-                       " (simulated method of moments)");
+  return "the impulse size then set so that the model's simulated world has the data's Mardia kurtosis, " + b2 +
+         " (simulated method of moments)";
 }
 
 /// match_tails on a candidate's model; its reported values and standard errors follow (the
@@ -603,9 +600,7 @@ std::string match_tails(const Suite& suite, SuiteModel& model, const std::string
 void match_candidate_tails(const Round& round, Candidate& c, const std::string& effect) {
   const std::string note = match_tails(round.suite, c.model, effect, round.cache, round.seed);
   if (note.empty()) return;
-  const std::size_t earlier = c.note.find(kTailsNote);  // matched before (it ends the note): now again
-  if (earlier != std::string::npos) c.note.erase(earlier >= 2 ? earlier - 2 : earlier);
-  c.note += (c.note.empty() ? "" : "; ") + note;
+  c.tails_note = note;  // a match before (an adoption's refit moved the rate) is replaced
   const std::vector<double>& v = find_spec(c.model.effects, effect)->values;
   for (std::size_t i = 0; i < v.size() && i < c.values.size(); ++i) {
     if (i < c.stderrs.size() && c.values[i] != 0) c.stderrs[i] *= std::abs(v[i] / c.values[i]);
@@ -1468,7 +1463,8 @@ std::string explain(const Candidate& c) {
       text += " and " + c.evidence[1].first + " (+" + format_number(c.evidence[1].second, "%.3g") + ")";
     }
   }
-  if (!c.note.empty()) text += " [" + c.note + "]";
+  const std::string note = c.note + (c.note.empty() || c.tails_note.empty() ? "" : "; ") + c.tails_note;
+  if (!note.empty()) text += " [" + note + "]";
   return text;
 }
 

@@ -121,6 +121,9 @@ struct Candidate {
   /// The experiments whose likelihood rose most, with the rise: where the effect showed.
   std::vector<std::pair<std::string, double>> evidence;
   std::string note;   // how a parameter was found when the likelihood cannot (bumps' sigma)
+  /// How the impulse size of a heavy-tailed effect was set by the data's tails (match_tails),
+  /// "" when it was not; a later match replaces it.
+  std::string tails_note;
   std::string physics, signature;  // its CandidateType's, for explain
   bool robot = false;              // moves robot parameters: its YAML is the robot line
   SuiteModel model;   // the model with this candidate added
