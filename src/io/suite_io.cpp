@@ -77,7 +77,7 @@ SuiteRun load_log(const std::string& log_file) {
   std::size_t reference_pieces = 0;
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const wheel_log::Row& row = rows[i];
-    if (!row.wheels) csv::fail(log_file, row.line, "left", "empty cell");  // a suite's log has both on every row
+    if (!row.wheels) csv::fail(log_file, row.line, "left,right", "a suite's log gives both wheels on every row");
     if (i > 0) {
       run.pieces.push_back({row.left_m - rows[i - 1].left_m, row.right_m - rows[i - 1].right_m});
       run.durations_s.push_back(row.t - rows[i - 1].t);
