@@ -1,5 +1,6 @@
 #include "io/csv.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -81,28 +82,35 @@ double Row::number(std::size_t i) const {
 }
 
 Table read(const std::string& file, const std::vector<std::string>& columns) {
-  return read(file, columns, "");
+  return read_any(file, {columns});
 }
 
 Table read(const std::string& file, const std::vector<std::string>& columns, const std::string& optional) {
-  auto meta = std::make_shared<Meta>(Meta{file, columns});
+  std::vector<std::string> with_optional = columns;
+  with_optional.push_back(optional);
+  return read_any(file, {columns, with_optional});
+}
+
+Table read_any(const std::string& file, const std::vector<std::vector<std::string>>& headers) {
+  auto meta = std::make_shared<Meta>(Meta{file, headers.front()});
   Table table{meta, {}};
   int number = 0;
   bool header = false;
-  std::vector<std::string> with_optional = columns;
-  with_optional.push_back(optional);
+  auto expected = [&headers] {
+    std::string out;
+    for (std::size_t i = 0; i < headers.size(); ++i) {
+      out += (i == 0 ? "'" : i + 1 == headers.size() ? " or '" : ", '") + joined(headers[i]) + "'";
+    }
+    return out;
+  };
   for (const std::string& line : lines_of(file)) {
     ++number;
     if (trim(line).empty()) continue;
     std::vector<std::string> cells = split(line);
     if (!header) {
-      if (!optional.empty() && cells == with_optional) {
-        meta->columns = with_optional;
-      } else if (cells != columns) {
-        fail(file, number, "",
-             "expected the header '" + joined(columns) + "'" +
-                 (optional.empty() ? "" : " or '" + joined(with_optional) + "'") + ", got " + quote(trim(line)));
-      }
+      const auto match = std::find(headers.begin(), headers.end(), cells);
+      if (match == headers.end()) fail(file, number, "", "expected the header " + expected() + ", got " + quote(trim(line)));
+      meta->columns = *match;
       header = true;
       continue;
     }
@@ -112,7 +120,7 @@ Table read(const std::string& file, const std::vector<std::string>& columns, con
     }
     table.rows.push_back({meta, number, std::move(cells)});
   }
-  if (!header) throw InputError(file, 0, "", "empty file: expected the header '" + joined(columns) + "'");
+  if (!header) throw InputError(file, 0, "", "empty file: expected the header " + expected());
   if (table.rows.empty()) throw InputError(file, number, "", "no data rows after the header");
   return table;
 }

@@ -38,6 +38,9 @@ Table read(const std::string& file, const std::vector<std::string>& columns);
 /// The same with an optional last column: the header is `columns`, or `columns` then
 /// `optional` (the table's meta lists the columns the file has).
 Table read(const std::string& file, const std::vector<std::string>& columns, const std::string& optional);
+/// The same with any of `headers` (the first when the file has none; the table's meta lists the
+/// columns the file has).
+Table read_any(const std::string& file, const std::vector<std::vector<std::string>>& headers);
 
 /// Reads a headerless numeric CSV (recordings): every row must have `min_cells` cells or more.
 Table read_headerless(const std::string& file, std::size_t min_cells);

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <set>
 
@@ -281,16 +280,11 @@ std::vector<ImportedFile> import_csv_logs(const CsvImportOptions& o,
 }
 
 EncoderLog load_encoder_log(const std::string& file, double left_scale, double right_scale) {
-  std::vector<std::string> columns = {"t", "left", "right"};
-  {
-    std::ifstream in(file);
-    std::string header;
-    if (in && std::getline(in, header) && header.find("theta") != std::string::npos) {
-      columns = {"t", "left", "right", "x", "y", "theta"};
-    }
-  }
   // A suite's log may end with heading0 (the start heading, first row): read and ignored here.
-  const csv::Table table = columns.size() == 6 ? csv::read(file, columns, "heading0") : csv::read(file, columns);
+  const std::vector<std::string> wheels = {"t", "left", "right"}, reference = {"t", "left", "right", "x", "y", "theta"};
+  std::vector<std::string> suite_log = reference;
+  suite_log.push_back("heading0");
+  const csv::Table table = csv::read_any(file, {wheels, reference, suite_log});
   EncoderLog log;
   for (const wheel_log::Row& row : wheel_log::read(file, table, wheel_log::Origin::first_row, left_scale, right_scale)) {
     if (!row.wheels) continue;  // a reference-only row
