@@ -43,9 +43,12 @@ same way with nothing varying between groups: a group_variation named there is a
 the group candidates, counted apart (group_false_alarms over grouped_without_group).
 
 Open worlds: physics in no catalogue (OPEN below; `--cases open`): a scale that grows with speed,
-a wheelbase that differs between left and right turns, a scale on backward travel only, and a
+a wheelbase that differs between left and right turns, a scale on backward travel only, a
 sloped floor that pushes the robot downhill by a fixed amount per metre driven (written into the
-measured poses after synth: no effect of odomcov's, custom or catalogue, can express it). The
+measured poses after synth: no effect of odomcov's, custom or catalogue, can express it), a
+sideways drift, noise that grows with speed, a drift that depends on the heading, noise that is
+larger on left turns, a scale that settles as the tyres warm, and a sideways slip that grows with
+speed. The
 loop is run twice: on the catalogue alone, where no catalogue effect may be adopted as a cause
 and the run must end `explained: false` with the right residual feature first; and, where the
 physics can be written as a custom effect, with that hypothesis offered (`--candidates`, from
@@ -130,6 +133,14 @@ GROUP_RUNS = (4, 8)
 #    metre, a = 0.003..0.008 (a slope whose downhill is the world's +y); each run starts at a
 #    random heading (heading0 uniform on [-pi, pi]). Its residual feature is heading: the runs of
 #    one experiment end apart along their start headings (the residual features' run part).
+# Added later, as physics the loop had never been run on (their features stated before any run):
+#  turn_noise: the wheel noise variance is 1 + a times larger while turning left, a = 2..6 (a
+#    caster that shimmies on one side); the feature is turn_direction (on the scatter);
+#  warm_up: the distance scale settles as the tyres warm, 1 + a exp(-t / 20 s), a = 0.01..0.03;
+#    the feature is distance (a scale that changes along the run);
+#  lateral_speed: a sideways slip that grows with speed, a v per metre, a = 0.003..0.01 s (a
+#    cross wind, or a camber that the robot rides up faster); its worlds are driven at SPEEDS;
+#    the feature is speed (on the mean).
 SPEED_SCALE = "speed_scale"
 SPEEDS = (0.15, 0.6)
 V0 = 0.375
@@ -141,9 +152,12 @@ OPEN = {
     "lateral_drift": (0.002, 0.006, "distance", "lateral: \"a\""),
     "speed_noise": (4.0, 10.0, "speed", "noise: \"1 + a * v\""),
     "heading_drift": (0.003, 0.008, "heading", "lateral: \"a * cos(heading)\""),
+    "turn_noise": (2.0, 6.0, "turn_direction", "noise: \"1 + a * (turn > 0)\""),
+    "warm_up": (0.01, 0.03, "distance", "scale: \"1 + a * exp(-t / 20)\""),
+    "lateral_speed": (0.003, 0.01, "speed", "lateral: \"a * v\""),
 }
 # The open worlds driven at SPEEDS, and those whose runs start at random headings.
-AT_SPEEDS = (SPEED_SCALE, "speed_noise")
+AT_SPEEDS = (SPEED_SCALE, "speed_noise", "lateral_speed")
 AT_HEADINGS = ("heading_drift",)
 ROUNDS = 3
 
@@ -310,7 +324,7 @@ def draw_open(rng, name):
     lo, hi = OPEN[name][:2]
     if name == "floor_slope":
         return {"g": log_uniform(rng, lo, hi), "phi": rng.uniform(-math.pi, math.pi)}
-    if name == "speed_noise":  # a noise factor must stay positive
+    if name in ("speed_noise", "turn_noise"):  # a noise factor must stay positive
         return {"a": log_uniform(rng, lo, hi)}
     return {"a": signed(rng, lo, hi)}
 
