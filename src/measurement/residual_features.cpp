@@ -17,6 +17,11 @@ namespace odomcov {
 namespace {
 
 constexpr int kDim = 3;
+/// The systematic directions a feature can modulate (kDirections below): the three factor
+/// effects and a sideways slip.
+constexpr int kDirectionCount = 4;
+/// The mean part's base terms per experiment: a constant end-frame offset and the directions.
+constexpr int kBaseTerms = kDim + kDirectionCount;
 /// A wheel's direction counts as reversed once it has moved this far back from its furthest
 /// point: encoder jitter of a tick or two on a standing wheel is not a reversal.
 constexpr double kReversalHysteresis_m = 0.005;
@@ -190,7 +195,7 @@ const std::vector<Feature>& features() {
        "reversal to the next, not the constant loss of backlash"},
       {"speed", 1, [](const PathFeatures& f, int) { return f.speed_mps; },
        "a scale or slip that grows with speed: not in the catalogue; a custom effect such as "
-       "scale: 1 + a*(v - v0) would model it",
+       "scale: 1 + a*(v - v0), or for a sideways slip lateral: a*v, would model it",
        "noise that grows with speed (slip and vibration at speed): not in the catalogue; a "
        "custom effect with noise: \"1 + a*v\", a factor on the wheel-noise variance, would "
        "model it"},
@@ -231,7 +236,8 @@ const std::vector<Feature>& features() {
 /// and its spread about its own mean against the prediction (the scatter part).
 struct ExperimentMean {
   Vector3 r = Vector3::Zero();
-  Eigen::Matrix3d S = Eigen::Matrix3d::Zero();  // d r / d (Es, Eb, Ed), columns, end frame
+  // d r / d (Es, Eb, Ed, lateral slip), columns, end frame
+  Eigen::Matrix<double, kDim, kDirectionCount> S = Eigen::Matrix<double, kDim, kDirectionCount>::Zero();
   Matrix3 W = Matrix3::Zero();  // C^-1
   PathFeatures features;
   std::string group;
@@ -287,18 +293,41 @@ void f_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::Matr
 }
 
 /// The systematic directions a feature can modulate: the wheel scale, the wheelbase and the
-/// wheel diameter ratio (the catalogue's factor parameters, neutral at 1).
-const char* const kDirections[] = {"scale_error", "wheelbase_error", "wheel_diameter_ratio"};
+/// wheel diameter ratio (the catalogue's factor parameters, neutral at 1), and a sideways slip of
+/// the centre per metre of wheel travel (a custom `lateral`, neutral at 0: a floor's camber or a
+/// carpet's pile, in no catalogue, and no combination of the factors).
+constexpr const char* kLateralSlip = "lateral_slip";
+const char* const kDirections[kDirectionCount] = {"scale_error", "wheelbase_error", "wheel_diameter_ratio",
+                                                  kLateralSlip};
 constexpr double kSensitivityStep = 1e-4;
 
-/// The model with one factor effect moved by kSensitivityStep (added at 1 + step if absent).
-SuiteModel nudged(const SuiteModel& model, const std::string& effect) {
+/// The sideways slip's direction: a custom effect `lateral: "a"` at a = kSensitivityStep, one
+/// definition for every model (the residual cache keys a custom effect by its definition).
+const EffectSpec& lateral_slip_nudge() {
+  static const EffectSpec spec = [] {
+    CustomEffect def;
+    def.name = "residual_features_lateral_slip";
+    def.parameters = {"a"};
+    def.key = "residual features";
+    def.lateral.text = "a";
+    return define_custom_effect(std::move(def), {kSensitivityStep});
+  }();
+  return spec;
+}
+
+/// The model moved by kSensitivityStep along one direction: a factor effect moved (added at
+/// 1 + step if absent), or the sideways slip added.
+SuiteModel nudged(const SuiteModel& model, const std::string& direction) {
   SuiteModel m = model;
-  if (EffectSpec* e = find_spec(m.effects, effect)) {
+  if (direction == kLateralSlip) {
+    m.effects.push_back(lateral_slip_nudge());
+    return m;
+  }
+  if (EffectSpec* e = find_spec(m.effects, direction)) {
     e->values[0] += kSensitivityStep;
     return m;
   }
-  m.effects.push_back({effect, {1.0 + kSensitivityStep}});
+  m.effects.push_back({direction, {1.0 + kSensitivityStep}});
   return m;
 }
 
@@ -367,7 +396,7 @@ void experiment_scatter(const std::vector<Vector3>& r, const std::vector<Matrix3
   m.shape = 0.5 * kDim * (static_cast<double>(r.size()) - 1.0);
 }
 
-/// Experiment e's mean residual, its sensitivities to the factor directions (from the nudged
+/// Experiment e's mean residual, its sensitivities to the directions (from the nudged
 /// models' residuals `nudges`) and its covariance, all in the runs' end frames, with its mean
 /// features, group and scatter part. False when the covariance is not positive definite (no
 /// test can use the experiment).
@@ -384,7 +413,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
     covs.push_back(R * res.cov * R.transpose());
     m.frames.push_back(R);
     m.r += runs.back() / n;
-    for (int j = 0; j < kDim; ++j) {
+    for (int j = 0; j < kDirectionCount; ++j) {
       m.S.col(j) += R * ((*nudges[static_cast<std::size_t>(j)])[e][r].mean - res.mean) / (kSensitivityStep * n);
     }
     C += covs.back() / (n * n);
@@ -405,7 +434,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
 
 /// The means of every experiment with runs and a usable covariance; `nudges` are the residuals
 /// of the model nudged along each of kDirections (the first-order sensitivity of every run's
-/// predicted mean to each factor direction).
+/// predicted mean to each direction).
 std::vector<ExperimentMean> experiment_means(const Suite& suite, const SuiteModel& model, const Residuals& residuals,
                                              const std::vector<const Residuals*>& nudges) {
   const double B = model.robot.wheelbase_m;
@@ -564,8 +593,8 @@ void mean_group_test(const std::vector<ExperimentMean>& ms, const std::vector<Ei
   if (groups < 2) return;
   std::vector<Eigen::MatrixXd> X1;
   for (std::size_t e = 0; e < ms.size(); ++e) {
-    Eigen::MatrixXd x = Eigen::MatrixXd::Zero(kDim, 2 * kDim * groups);
-    x.middleCols(2 * kDim * g[e], 2 * kDim) = X0[e];
+    Eigen::MatrixXd x = Eigen::MatrixXd::Zero(kDim, kBaseTerms * groups);
+    x.middleCols(kBaseTerms * g[e], kBaseTerms) = X0[e];
     X1.push_back(x);
   }
   f_test(ms, X0, X1, a);
@@ -786,12 +815,13 @@ std::vector<ResidualAlignment> alignment(const Suite& suite, const SuiteModel& m
                                          const SimulatedDispersion* simulated) {
   std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals, nudges);
   if (simulated) simulated_dispersions(suite, model, residuals, *simulated, ms);
-  // Mean part, H0: the misfit is a constant offset in the end frame plus constant factor
-  // errors, r_e = [I3 S_e] c. H1 adds the same terms modulated by the feature, f_e [I3 S_e] d: a
-  // scale, wheelbase or diameter ratio (or an offset) that varies with the feature.
+  // Mean part, H0: the misfit is a constant offset in the end frame plus constant factor errors
+  // and a constant sideways slip, r_e = [I3 S_e] c. H1 adds the same terms modulated by the
+  // feature, f_e [I3 S_e] d: a scale, wheelbase, diameter ratio or sideways slip (or an offset)
+  // that varies with the feature.
   std::vector<Eigen::MatrixXd> X0;
   for (const ExperimentMean& m : ms) {
-    Eigen::MatrixXd x(kDim, 2 * kDim);
+    Eigen::MatrixXd x(kDim, kBaseTerms);
     x << Matrix3::Identity(), m.S;
     X0.push_back(x);
   }
