@@ -474,10 +474,10 @@ TEST(Verdict, AFoldLossIsJudgedAgainstTheDispersionTheModelLeaves) {
   EXPECT_GE(spin->gain, -kMaxFoldLoss * ratio.mean_dispersion);
 }
 
-// In this lab every run starts from rest and stops once, so its acceleration feature (the swings
-// of its wheel speeds) is twice its speed: the two columns are the same but for the pieces'
-// rounding, their tests agree to the second digit (1.51e-27 and 1.53e-27), and either may come
-// first. Both must lead, significantly.
+// In this lab every run starts from rest and stops once at one speed, so its acceleration feature
+// (the swings of its wheel speeds) is close to twice its speed: the two columns are nearly
+// proportional, their tests agree to the second digit (1.51e-27 and 1.53e-27), and either may
+// come first. Both must lead, significantly.
 TEST(Verdict, SpeedDependentScaleIsNotExplainedAndPointsAtSpeed) {
   const Suite s = lab({kSource + "/tests/data/worlds/speed_slow.yaml",
                        kSource + "/tests/data/worlds/speed_fast.yaml"});
