@@ -324,7 +324,7 @@ def draw_open(rng, name):
     lo, hi = OPEN[name][:2]
     if name == "floor_slope":
         return {"g": log_uniform(rng, lo, hi), "phi": rng.uniform(-math.pi, math.pi)}
-    if name in ("speed_noise", "turn_noise"):  # a noise factor must stay positive
+    if (OPEN[name][3] or "").startswith("noise:"):  # a noise factor must stay positive
         return {"a": log_uniform(rng, lo, hi)}
     return {"a": signed(rng, lo, hi)}
 

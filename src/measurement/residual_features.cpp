@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <cmath>
@@ -17,7 +18,7 @@ namespace odomcov {
 namespace {
 
 constexpr int kDim = 3;
-/// The systematic directions a feature can modulate (kDirections below): the three factor
+/// The systematic directions a feature can modulate (directions() below): the three factor
 /// effects and a sideways slip.
 constexpr int kDirectionCount = 4;
 /// The mean part's base terms per experiment: a constant end-frame offset and the directions.
@@ -292,42 +293,35 @@ void f_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::Matr
   f_result(std::max(0.0, (rss0 - rss1) / out.dof1) / (rss1 / out.dof2), out.dof1, out.dof2, out);
 }
 
-/// The systematic directions a feature can modulate: the wheel scale, the wheelbase and the
-/// wheel diameter ratio (the catalogue's factor parameters, neutral at 1), and a sideways slip of
-/// the centre per metre of wheel travel (a custom `lateral`, neutral at 0: a floor's camber or a
-/// carpet's pile, in no catalogue, and no combination of the factors).
-constexpr const char* kLateralSlip = "lateral_slip";
-const char* const kDirections[kDirectionCount] = {"scale_error", "wheelbase_error", "wheel_diameter_ratio",
-                                                  kLateralSlip};
 constexpr double kSensitivityStep = 1e-4;
 
-/// The sideways slip's direction: a custom effect `lateral: "a"` at a = kSensitivityStep, one
-/// definition for every model (the residual cache keys a custom effect by its definition).
-const EffectSpec& lateral_slip_nudge() {
-  static const EffectSpec spec = [] {
-    CustomEffect def;
-    def.name = "residual_features_lateral_slip";
-    def.parameters = {"a"};
-    def.key = "residual features";
-    def.lateral.text = "a";
-    return define_custom_effect(std::move(def), {kSensitivityStep});
+/// The systematic directions a feature can modulate, each an effect at its neutral value: the
+/// wheel scale, the wheelbase and the wheel diameter ratio (the catalogue's factor parameters,
+/// neutral at 1), and a sideways slip of the centre per metre of wheel travel (a custom
+/// `lateral: "a"`, neutral at 0: a floor's camber or a carpet's pile, in no catalogue, and no
+/// combination of the factors). One definition of the custom for every model (the residual
+/// cache keys a custom effect by its definition).
+const std::array<EffectSpec, kDirectionCount>& directions() {
+  static const std::array<EffectSpec, kDirectionCount> table = [] {
+    CustomEffect slip;
+    slip.name = "residual_features_lateral_slip";
+    slip.parameters = {"a"};
+    slip.key = "residual features";
+    slip.lateral.text = "a";
+    return std::array<EffectSpec, kDirectionCount>{EffectSpec{"scale_error", {1.0}}, EffectSpec{"wheelbase_error", {1.0}},
+                                                   EffectSpec{"wheel_diameter_ratio", {1.0}},
+                                                   define_custom_effect(std::move(slip), {0.0})};
   }();
-  return spec;
+  return table;
 }
 
-/// The model moved by kSensitivityStep along one direction: a factor effect moved (added at
-/// 1 + step if absent), or the sideways slip added.
-SuiteModel nudged(const SuiteModel& model, const std::string& direction) {
+/// The model moved by kSensitivityStep along one direction: its effect's value moved, or the
+/// effect added at its neutral value plus the step.
+SuiteModel nudged(const SuiteModel& model, const EffectSpec& direction) {
   SuiteModel m = model;
-  if (direction == kLateralSlip) {
-    m.effects.push_back(lateral_slip_nudge());
-    return m;
-  }
-  if (EffectSpec* e = find_spec(m.effects, direction)) {
-    e->values[0] += kSensitivityStep;
-    return m;
-  }
-  m.effects.push_back({direction, {1.0 + kSensitivityStep}});
+  EffectSpec* e = find_spec(m.effects, direction.name);
+  if (!e) e = &m.effects.emplace_back(direction);
+  e->values[0] += kSensitivityStep;
   return m;
 }
 
@@ -433,7 +427,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
 }
 
 /// The means of every experiment with runs and a usable covariance; `nudges` are the residuals
-/// of the model nudged along each of kDirections (the first-order sensitivity of every run's
+/// of the model nudged along each of directions() (the first-order sensitivity of every run's
 /// predicted mean to each direction).
 std::vector<ExperimentMean> experiment_means(const Suite& suite, const SuiteModel& model, const Residuals& residuals,
                                              const std::vector<const Residuals*>& nudges) {
@@ -862,7 +856,7 @@ std::vector<ResidualAlignment> alignment(const Suite& suite, const SuiteModel& m
 std::vector<ResidualAlignment> residual_alignment(const Suite& suite, const SuiteModel& model,
                                                   const Residuals& residuals, const SimulatedDispersion* simulated) {
   std::vector<Residuals> nudges;
-  for (const char* effect : kDirections) nudges.push_back(odomcov::residuals(suite, nudged(model, effect)));
+  for (const EffectSpec& d : directions()) nudges.push_back(odomcov::residuals(suite, nudged(model, d)));
   std::vector<const Residuals*> read;
   for (const Residuals& r : nudges) read.push_back(&r);
   return alignment(suite, model, residuals, read, simulated);
@@ -871,7 +865,7 @@ std::vector<ResidualAlignment> residual_alignment(const Suite& suite, const Suit
 std::vector<ResidualAlignment> residual_alignment(ResidualCache& cache, const SuiteModel& model,
                                                   const SimulatedDispersion* simulated) {
   std::vector<const Residuals*> nudges;  // the cache's entries stay where they are until it ages
-  for (const char* effect : kDirections) nudges.push_back(&cache.full(nudged(model, effect)));
+  for (const EffectSpec& d : directions()) nudges.push_back(&cache.full(nudged(model, d)));
   return alignment(cache.suite(), model, cache.full(model), nudges, simulated);
 }
 
