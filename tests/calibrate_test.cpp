@@ -250,6 +250,37 @@ TEST(Diagnose, AMimicIsNamedAndNotAdopted) {
   EXPECT_NE(tdw.decision.find("predicts the held-out folds better"), std::string::npos) << tdw.decision;
 }
 
+TEST(Diagnose, AFoldThatLeavesTheModelUndeterminedTestsNothing) {
+  // The model's turn-dependent wheelbase is right, and the wheel diameters differ (Ed = 0.998).
+  // Only the arcs turn along arcs, so with the arcs held out the model's arc wheelbase is not
+  // determined: that fold cannot test the diameter ratio, whatever its gain there (with and
+  // without it the prediction of the arcs extrapolates the arc wheelbase). The folds that do
+  // not turn leave the model determined and test it, and it is adopted. (The spins hold 94% of
+  // the information about the spin wheelbase, the squares' turns on the spot the rest: with
+  // them held out it is not determined either, at 4 times its standard error.)
+  const EffectSpec tdw{"turn_dependent_wheelbase", {1.02, 1.01}};
+  const Suite lab = test::synth_suite(standard_world({tdw, {"wheel_diameter_ratio", {0.998}}}, 21), "undetermined");
+  SuiteModel model = suite_model(lab);
+  model.effects = {tdw};
+  const Diagnosis d = diagnose(lab, model, kDiagnoseAlpha, {"wheel_diameter_ratio"});
+  const Candidate& c = candidate(d, "wheel_diameter_ratio");
+  ASSERT_FALSE(c.held_out_by_fold.empty());
+  for (const Candidate::FoldGain& g : c.held_out_by_fold) {
+    if (g.fold == "arc") {
+      EXPECT_FALSE(g.counted);
+      EXPECT_FALSE(g.contradicts);
+      EXPECT_EQ(g.undetermined, "turn_dependent_wheelbase.Eb_arc");
+      EXPECT_GT(g.model_stderr_ratio, kMaxFoldStderrRatio);
+      EXPECT_NE(c.decision.find("the model's turn_dependent_wheelbase.Eb_arc is not determined"), std::string::npos)
+          << c.decision;
+    } else if (g.fold == "line" || g.fold == "forward") {  // no turning: the rest fix the model
+      EXPECT_TRUE(g.undetermined.empty()) << g.fold << ": " << g.undetermined;
+      EXPECT_LE(g.model_stderr_ratio, kMaxFoldStderrRatio) << g.fold;
+    }
+  }
+  EXPECT_EQ(c.verdict, "adopted") << c.decision;
+}
+
 TEST(Diagnose, ASystematicCandidateThatOnlyInflatesTheCovarianceIsStopped) {
   // Negatively correlated wheel noise inflates the heading variance on straight lines. A custom
   // wheelbase on lines only cannot move any mean there (nothing turns), but a smaller wheelbase

@@ -43,10 +43,10 @@ Folds folds_of(const std::string& by, const Labels& labels) {
   return f;
 }
 
-/// The standard errors of `own` in a fit (NaN where it has none or lacks the name).
-std::vector<double> stderrs_of(const FitResult& fit, const std::vector<std::string>& own) {
+/// The standard errors of `names` in a fit (NaN where it has none or lacks the name).
+std::vector<double> stderrs_of(const FitResult& fit, const std::vector<std::string>& names) {
   std::vector<double> out;
-  for (const std::string& name : own) {
+  for (const std::string& name : names) {
     const auto at = std::find(fit.names.begin(), fit.names.end(), name);
     out.push_back(at == fit.names.end() ? std::numeric_limits<double>::quiet_NaN()
                                         : fit.stderrs(static_cast<Eigen::Index>(at - fit.names.begin())));
@@ -109,7 +109,7 @@ FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& s
   for (std::size_t f = 0; f < folds.size(); ++f) {
     if (names.empty()) {
       out.models.push_back(start);
-      out.own_stderrs.emplace_back();
+      out.stderrs.emplace_back();
       continue;
     }
     ResidualCache view(cache, folds.training(f));
@@ -118,7 +118,7 @@ FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& s
     // fit, so that neither side of a held-out comparison rests on the fast path alone.
     const FitResult r = refit_exactly(first, own.empty() ? names : own, kind, evaluations, view);
     out.models.push_back(r.model);
-    out.own_stderrs.push_back(stderrs_of(r, own));
+    out.stderrs.push_back(stderrs_of(r, names));
   }
   return out;
 }

@@ -619,23 +619,24 @@ const FoldFits& base_folds(const Round& round, FoldSet& set, Likelihood kind) {
   return *slot;
 }
 
-/// The largest ratio of a fold fit's standard error of an own parameter to the in-sample one
-/// (infinite where the fold's fit has none and the in-sample fit has one; 1 where neither).
-double stderr_ratio(const std::vector<double>& fold, const std::vector<double>& in_sample) {
-  double most = 1.0;
-  for (std::size_t k = 0; k < fold.size() && k < in_sample.size(); ++k) {
-    if (!std::isfinite(in_sample[k]) || in_sample[k] <= 0) continue;
-    most = std::max(most, std::isfinite(fold[k]) ? fold[k] / in_sample[k] : std::numeric_limits<double>::infinity());
+/// The largest ratio of a fold fit's standard error to the in-sample one over the parameters
+/// [first, last) of a fit's names (infinite where the fold's fit has none and the in-sample fit
+/// has one; 1 where neither), and the name of that parameter ("" when every ratio is 1 or less).
+struct StderrRatio {
+  double ratio = 1.0;
+  std::string name;
+};
+
+StderrRatio stderr_ratio(const std::vector<double>& fold, const Eigen::VectorXd& in_sample,
+                         const std::vector<std::string>& names, std::size_t first, std::size_t last) {
+  StderrRatio most;
+  for (std::size_t k = first; k < last && k < fold.size() && k < static_cast<std::size_t>(in_sample.size()); ++k) {
+    const double s = in_sample(static_cast<Eigen::Index>(k));
+    if (!std::isfinite(s) || s <= 0) continue;
+    const double r = std::isfinite(fold[k]) ? fold[k] / s : std::numeric_limits<double>::infinity();
+    if (r > most.ratio) most = {r, names[k]};
   }
   return most;
-}
-
-/// The candidate's own parameters' in-sample standard errors, in the order of its fitted names.
-std::vector<double> own_stderrs(const Trial& t) {
-  std::vector<double> out;
-  const std::size_t first = t.fitted.size() - t.type->fitted.size();
-  for (std::size_t k = first; k < t.fitted.size(); ++k) out.push_back(t.fit.stderrs(static_cast<Eigen::Index>(k)));
-  return out;
 }
 
 /// What a candidate is judged on, against the base: its part of the likelihood, and for a
@@ -673,7 +674,7 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
                                   round.counter(), round.path);
   if (round.progress) round.progress->fits_done += static_cast<std::int64_t>(folds.size());
   const bool on_mean = judged_on_mean(t, t.c.model);
-  const std::vector<double> in_sample = own_stderrs(t);
+  const std::size_t first_own = t.fitted.size() - t.type->fitted.size();
   const std::vector<double> signal = fold_signal(round, folds, t, on_mean);
   t.c.held_out_by_fold.clear();
   bool any = false;
@@ -682,12 +683,22 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
     const std::vector<bool> training = folds.training(f);
     const auto& b = round.cache.full(base.models[f], round.counter());
     const auto& c = round.cache.full(mine.models[f], round.counter());
+    const StderrRatio own = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, first_own, t.fitted.size());
+    const StderrRatio model = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, 0, first_own);
     Candidate::FoldGain g{folds.names[f],
                           held_out_log_likelihood(judged(c, b, on_mean), training, t.kind) -
                               held_out_log_likelihood(b, training, t.kind),
-                          stderr_ratio(mine.own_stderrs[f], in_sample), signal[f], true};
-    g.counted = g.stderr_ratio <= kMaxFoldStderrRatio && std::abs(g.signal) >= kMinFoldSignal;
-    g.contradicts = !g.counted && std::abs(g.signal) >= kMinFoldSignal &&
+                          own.ratio, signal[f], true};
+    g.model_stderr_ratio = model.ratio;
+    if (model.ratio > kMaxFoldStderrRatio) g.undetermined = model.name;
+    // A fold whose training runs leave a parameter of the model itself undetermined tests
+    // nothing: the candidate's fit and the base's both extrapolate it there, and their
+    // difference follows where each one's fit wandered (with the circles held out of June's
+    // runs, the arc wheelbase, 47 times its standard error, moved by 0.014 when a diameter
+    // ratio joined it, and the circles' 12.6 rad of turning made that a loss of 1475).
+    const bool model_determined = model.ratio <= kMaxFoldStderrRatio;
+    g.counted = model_determined && g.stderr_ratio <= kMaxFoldStderrRatio && std::abs(g.signal) >= kMinFoldSignal;
+    g.contradicts = !g.counted && model_determined && std::abs(g.signal) >= kMinFoldSignal &&
                     g.stderr_ratio <= kMaxContradictionStderrRatio &&
                     g.gain < -contradiction_bound(g.stderr_ratio, t.c.dof);
     if (g.counted) total += g.gain;
@@ -716,10 +727,13 @@ std::string why_uncounted(const Candidate& c, const Candidate::FoldGain& g) {
            " times the standard error), and it loses " + format_number(-g.gain, "%.3g") +
            " there, more than that uncertainty explains: what the other runs fit is not what it wants";
   }
-  if (g.stderr_ratio > kMaxFoldStderrRatio) {
-    return "without it " + c.effect + " is not determined: " +
-           (std::isfinite(g.stderr_ratio) ? format_number(g.stderr_ratio, "%.2g") + " times the standard error"
-                                          : std::string("no standard error"));
+  const auto times = [](double ratio) {
+    return std::isfinite(ratio) ? format_number(ratio, "%.2g") + " times the standard error" : std::string("no standard error");
+  };
+  if (g.stderr_ratio > kMaxFoldStderrRatio) return "without it " + c.effect + " is not determined: " + times(g.stderr_ratio);
+  if (!g.undetermined.empty()) {
+    return "without it the model's " + g.undetermined + " is not determined (" + times(g.model_stderr_ratio) +
+           "): with and without " + c.effect + " the prediction there extrapolates it";
   }
   return "nothing to predict there: in-sample gain " + format_number(g.signal, "%+.2g");
 }

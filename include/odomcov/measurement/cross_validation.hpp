@@ -55,9 +55,9 @@ Folds feature_folds(const std::vector<double>& values, const std::string& featur
 /// A fit repeated on each fold's complement.
 struct FoldFits {
   std::vector<SuiteModel> models;  // per fold: fitted on every other fold's runs
-  /// Per fold: the standard errors of the `own` parameters in that fold's fit (NaN where it
-  /// has none), in the order of `own`.
-  std::vector<std::vector<double>> own_stderrs;
+  /// Per fold: the standard errors of every fitted parameter in that fold's fit (NaN where it
+  /// has none), in the order of the names fitted.
+  std::vector<std::vector<double>> stderrs;
 };
 
 /// For each fold f: fits `names` from `start` on the runs of every other fold, on a view of

@@ -158,13 +158,18 @@ struct Candidate {
     double signal = 0.0;
     /// False when the fold cannot test the candidate: it holds nearly all that the runs say
     /// about it (stderr_ratio > kMaxFoldStderrRatio: fitted without it, the candidate is not
-    /// determined), or the candidate changes nothing there (|signal| < kMinFoldSignal). Its
-    /// gain is then not counted.
+    /// determined) or about a parameter of the model (`undetermined`), or the candidate changes
+    /// nothing there (|signal| < kMinFoldSignal). Its gain is then not counted.
     bool counted = true;
     /// An undetermined fold's loss beyond what the uncertainty of the candidate fitted without
     /// it explains (contradiction_bound): the estimate from the other folds is not the one this
     /// fold wants, so the candidate is not one cause of both.
     bool contradicts = false;
+    /// The same ratio over the parameters of the model the candidate joins (the base's, refitted
+    /// with it), and the one beyond kMaxFoldStderrRatio ("" when none is): a fold whose training
+    /// runs leave the model itself undetermined cannot test the candidate either.
+    double model_stderr_ratio = 1.0;
+    std::string undetermined;
   };
   std::vector<FoldGain> held_out_by_fold;
   /// "adopted"; "mimic" (significant in-sample, predicts the held-out folds worse in all, one of
