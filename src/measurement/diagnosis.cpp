@@ -620,19 +620,23 @@ const FoldFits& base_folds(const Round& round, FoldSet& set, Likelihood kind) {
 }
 
 /// The largest ratio of a fold fit's standard error to the in-sample one over the parameters
-/// [first, last) of a fit's names (infinite where the fold's fit has none and the in-sample fit
-/// has one; 1 where neither), and the name of that parameter ("" when every ratio is 1 or less).
+/// [first, last) of a fit's names, and the name of that parameter ("" when every ratio is 1 or
+/// less). Where the fold's fit has no standard error and the in-sample fit has one, the ratio
+/// is infinite, or, with `missing_is_determined`, that parameter is skipped: a model's spread
+/// fitted to 0 on a fold, at the edge of its range, has none, and is pinned there, not
+/// wandering.
 struct StderrRatio {
   double ratio = 1.0;
   std::string name;
 };
 
 StderrRatio stderr_ratio(const std::vector<double>& fold, const Eigen::VectorXd& in_sample,
-                         const std::vector<std::string>& names, std::size_t first, std::size_t last) {
+                         const std::vector<std::string>& names, std::size_t first, std::size_t last,
+                         bool missing_is_determined) {
   StderrRatio most;
   for (std::size_t k = first; k < last && k < fold.size() && k < static_cast<std::size_t>(in_sample.size()); ++k) {
     const double s = in_sample(static_cast<Eigen::Index>(k));
-    if (!std::isfinite(s) || s <= 0) continue;
+    if (!std::isfinite(s) || s <= 0 || (missing_is_determined && !std::isfinite(fold[k]))) continue;
     const double r = std::isfinite(fold[k]) ? fold[k] / s : std::numeric_limits<double>::infinity();
     if (r > most.ratio) most = {r, names[k]};
   }
@@ -683,8 +687,8 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
     const std::vector<bool> training = folds.training(f);
     const auto& b = round.cache.full(base.models[f], round.counter());
     const auto& c = round.cache.full(mine.models[f], round.counter());
-    const StderrRatio own = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, first_own, t.fitted.size());
-    const StderrRatio model = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, 0, first_own);
+    const StderrRatio own = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, first_own, t.fitted.size(), false);
+    const StderrRatio model = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, 0, first_own, true);
     Candidate::FoldGain g{folds.names[f],
                           held_out_log_likelihood(judged(c, b, on_mean), training, t.kind) -
                               held_out_log_likelihood(b, training, t.kind),
