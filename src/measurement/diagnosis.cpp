@@ -698,7 +698,7 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
     // A fold whose training runs leave a parameter of the model itself undetermined tests
     // nothing: the candidate's fit and the base's both extrapolate it there, and their
     // difference follows where each one's fit wandered (with the circles held out of June's
-    // runs, the arc wheelbase, 47 times its standard error, moved by 0.014 when a diameter
+    // runs, the arc wheelbase, 48 times its standard error, moved by 0.014 when a diameter
     // ratio joined it, and the circles' 12.6 rad of turning made that a loss of 1475).
     const bool model_determined = model.ratio <= kMaxFoldStderrRatio;
     g.counted = model_determined && g.stderr_ratio <= kMaxFoldStderrRatio && std::abs(g.signal) >= kMinFoldSignal;
