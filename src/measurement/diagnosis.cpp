@@ -689,10 +689,12 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
     const auto& c = round.cache.full(mine.models[f], round.counter());
     const StderrRatio own = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, first_own, t.fitted.size(), false);
     const StderrRatio model = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, 0, first_own, true);
-    Candidate::FoldGain g{folds.names[f],
-                          held_out_log_likelihood(judged(c, b, on_mean), training, t.kind) -
-                              held_out_log_likelihood(b, training, t.kind),
-                          own.ratio, signal[f], true};
+    Candidate::FoldGain g;
+    g.fold = folds.names[f];
+    g.gain = held_out_log_likelihood(judged(c, b, on_mean), training, t.kind) -
+             held_out_log_likelihood(b, training, t.kind);
+    g.stderr_ratio = own.ratio;
+    g.signal = signal[f];
     g.model_stderr_ratio = model.ratio;
     if (model.ratio > kMaxFoldStderrRatio) g.undetermined = model.name;
     // A fold whose training runs leave a parameter of the model itself undetermined tests
