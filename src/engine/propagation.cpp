@@ -2,8 +2,8 @@
 
 #include <type_traits>
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <complex>
 #include <limits>
 #include <stdexcept>
@@ -92,13 +92,12 @@ class PieceWalker {
  private:
   /// One piece to the caller; `a` (when given) replaces the motion's acceleration.
   void one(const ArcSegment& encoder, double dt, const double* a) {
+    // for_each_piece walks an empty list itself: active_ has an effect, which reads the motion.
+    Motion motion = tracker_.next(encoder.left_m, encoder.right_m, dt);
+    if (a) motion.a_mps2 = *a;
     Systematic sys;
-    if (!active_.empty()) {
-      motion_ = tracker_.next(encoder.left_m, encoder.right_m, dt);
-      if (a) motion_.a_mps2 = *a;
-      for (const auto& e : active_) e->systematic(motion_, sys);
-    }
-    each_(encoder, motion_, sys);
+    for (const auto& e : active_) e->systematic(motion, sys);
+    each_(encoder, motion, sys);
   }
 
   void refine(const ArcSegment& encoder, double dt, double a, int depth) {
@@ -140,7 +139,6 @@ class PieceWalker {
   Each& each_;
   bool splits_ = false;  // a history effect may cut pieces (split_at)
   std::vector<const Effect*> refining_;
-  Motion motion_;
 };
 
 /// Runs a PieceWalker over the encoder pieces (durations as resolve takes them).
@@ -359,36 +357,100 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
 
 }  // namespace
 
+namespace {
+
+/// predict_mean's walk for one effect list: the true pose moved by each piece as the effects
+/// make it, and (unless given) the odometry's.
+class MeanWalk {
+ public:
+  MeanWalk(double wheelbase_m, const Vector3* odometry_end_pose)
+      : B_(wheelbase_m), odometry_end_pose_(odometry_end_pose) {}
+
+  void step(const ArcSegment& encoder, const effects::Systematic& sys) {
+    const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
+    const double center = travel.center_m(), angle = travel.heading_change_rad(sys.wheelbase_factor * B_);
+    const double lateral = sys.lateral * 0.5 * (std::abs(encoder.left_m) + std::abs(encoder.right_m));
+    const detail::ArcStep f(angle);
+    true_pose_.step(center, f, lateral);
+    if (odometry_end_pose_ != nullptr) return;
+    const double d_odometry = encoder.center_m(), a_odometry = encoder.heading_change_rad(B_);
+    if (d_odometry == center && a_odometry == angle && lateral == 0.0) {
+      odometry_.step(center, f);
+    } else {
+      odometry_.step(d_odometry, detail::ArcStep(a_odometry));
+    }
+  }
+
+  /// The end pose error as the external reference sees it (the effects' measurement hooks).
+  Vector3 error(std::vector<std::unique_ptr<effects::Effect>>& active) {
+    effects::ResolvedPath hooks;
+    hooks.measurement_effects = effects::measurement_effects(active);
+    Vector3 measured = true_pose_.pose();
+    Matrix3 unused = Matrix3::Zero();
+    hooks.measure(measured, unused);
+    return pose_error(measured, odometry_end_pose_ != nullptr ? *odometry_end_pose_ : odometry_.pose());
+  }
+
+ private:
+  double B_;
+  const Vector3* odometry_end_pose_;
+  PoseWalker true_pose_, odometry_;
+};
+
+/// Whether the effects walk the pieces as they come: none cuts (a history effect's split_at)
+/// or halves them (refines), so each piece's motion is the tracker's, whatever their values.
+bool walks_plainly(const std::vector<std::unique_ptr<effects::Effect>>& active) {
+  return std::none_of(active.begin(), active.end(), [](const auto& e) {
+    return e->dependence() == effects::Dependence::history || e->refines();
+  });
+}
+
+}  // namespace
+
 Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                      const Robot& robot, const EffectList& effect_list,
                      const Vector3* odometry_end_pose, double heading0_rad) {
   // resolve's pieces, streamed: only their true arcs (the same arithmetic), nothing stored.
   auto active = effects::instantiate(effect_list);
-  const double B = robot.wheelbase_m;
-  const bool odometry_given = odometry_end_pose != nullptr;
-  PoseWalker true_pose, odometry;
-  effects::for_each_piece(pieces, durations_s, B, heading0_rad, active,
+  MeanWalk walk(robot.wheelbase_m, odometry_end_pose);
+  effects::for_each_piece(pieces, durations_s, robot.wheelbase_m, heading0_rad, active,
                           [&](const ArcSegment& encoder, const effects::Motion&,
-                              const effects::Systematic& sys) {
-    const ArcSegment travel = sys.travel(encoder.left_m, encoder.right_m);
-    const double center = travel.center_m(), angle = travel.heading_change_rad(sys.wheelbase_factor * B);
-    const double lateral = sys.lateral * 0.5 * (std::abs(encoder.left_m) + std::abs(encoder.right_m));
-    const detail::ArcStep f(angle);
-    true_pose.step(center, f, lateral);
-    if (odometry_given) return;
-    const double d_odometry = encoder.center_m(), a_odometry = encoder.heading_change_rad(B);
-    if (d_odometry == center && a_odometry == angle && lateral == 0.0) {
-      odometry.step(center, f);
-    } else {
-      odometry.step(d_odometry, detail::ArcStep(a_odometry));
+                              const effects::Systematic& sys) { walk.step(encoder, sys); });
+  return walk.error(active);
+}
+
+std::vector<Vector3> predict_means(const std::vector<ArcSegment>& pieces,
+                                   const std::vector<double>& durations_s, const Robot& robot,
+                                   const std::vector<EffectList>& lists,
+                                   const Vector3* odometry_end_pose, double heading0_rad) {
+  std::vector<std::vector<std::unique_ptr<effects::Effect>>> active;
+  for (const EffectList& list : lists) active.push_back(effects::instantiate(list));
+  const bool shared = std::all_of(active.begin(), active.end(),
+                                  [](const auto& a) { return !a.empty() && walks_plainly(a); });
+  std::vector<Vector3> out;
+  if (!shared) {
+    for (const EffectList& list : lists) {
+      out.push_back(predict_mean(pieces, durations_s, robot, list, odometry_end_pose, heading0_rad));
     }
-  });
-  effects::ResolvedPath hooks;
-  hooks.measurement_effects = effects::measurement_effects(active);
-  Vector3 measured = true_pose.pose();
-  Matrix3 unused = Matrix3::Zero();
-  hooks.measure(measured, unused);
-  return pose_error(measured, odometry_given ? *odometry_end_pose : odometry.pose());
+    return out;
+  }
+  // The PieceWalker's plain path (one motion per piece, every effect's terms folded in), with
+  // each piece's motion computed once for every list.
+  const double B = robot.wheelbase_m;
+  std::vector<MeanWalk> walks(lists.size(), MeanWalk(B, odometry_end_pose));
+  effects::MotionTracker tracker(B, heading0_rad);
+  for (std::size_t i = 0; i < pieces.size(); ++i) {
+    const ArcSegment& encoder = pieces[i];
+    const effects::Motion motion =
+        tracker.next(encoder.left_m, encoder.right_m, durations_s.empty() ? std::nan("") : durations_s[i]);
+    for (std::size_t j = 0; j < walks.size(); ++j) {
+      effects::Systematic sys;
+      for (const auto& e : active[j]) e->systematic(motion, sys);
+      walks[j].step(encoder, sys);
+    }
+  }
+  for (std::size_t j = 0; j < walks.size(); ++j) out.push_back(walks[j].error(active[j]));
+  return out;
 }
 
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,

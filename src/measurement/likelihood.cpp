@@ -32,7 +32,7 @@ constexpr int kDim = 3;
 /// prediction's (on fine pieces predict_with_order's mean is predict_mean's bit for bit; on
 /// pieces it cannot coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative),
 /// and its odometry end pose, which the shifted parameter does not change. Two mean-only
-/// propagations per run.
+/// propagations per run, in one walk over its pieces where the effects allow (predict_means).
 struct GroupTerms {
   Vector3 shift = Vector3::Zero(), column = Vector3::Zero(), column2 = Vector3::Zero();
 };
@@ -45,11 +45,13 @@ GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<
   const double value = effects[target.effect].values[target.parameter];
   const EffectParameterInfo& p = info_of(effects[target.effect])->parameters[target.parameter];
   const double h = std::min({std::sqrt(3.0) * target.sd, 0.5 * (value - p.lower), 0.5 * (p.upper - value)});
-  EffectList shifted = effects;
-  shifted[target.effect].values[target.parameter] = value + h;
-  const Vector3 up = predict_mean(pieces, durations, robot, shifted, odometry_end_pose, heading0_rad);
-  shifted[target.effect].values[target.parameter] = value - h;
-  const Vector3 down = predict_mean(pieces, durations, robot, shifted, odometry_end_pose, heading0_rad);
+  std::vector<EffectList> shifted(2, effects);
+  shifted[0][target.effect].values[target.parameter] = value + h;
+  shifted[1][target.effect].values[target.parameter] = value - h;
+  const std::vector<Vector3> means =
+      predict_means(pieces, durations, robot, shifted, odometry_end_pose, heading0_rad);
+  const Vector3& up = means[0];
+  const Vector3& down = means[1];
   const double sd2_h2 = target.sd * target.sd / (h * h);  // 1/3 unless h is cut by a bound
   const Vector3 curvature = up + down - 2.0 * mid;        // h^2 f''
   return {0.5 * sd2_h2 * curvature, target.sd * (up - down) / (2.0 * h),

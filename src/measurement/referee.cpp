@@ -57,24 +57,25 @@ GroupShift group_shift(const std::vector<ArcSegment>& pieces, const std::vector<
                        const SuiteModel& model, const GroupTarget& t, double heading0_rad) {
   GroupShift g;
   if (!t.present || !(t.sd > 0.0)) return g;
-  EffectList effects = model.effects;
-  double& parameter = effects[t.effect].values[t.parameter];
+  const EffectList& effects = model.effects;
   const EffectParameterInfo& info = info_of(effects[t.effect])->parameters[t.parameter];
   g.present = true;
-  g.value = parameter;
+  g.value = effects[t.effect].values[t.parameter];
   g.sd = t.sd;
   // Within the parameter's range, as group_terms keeps its points (half the way to a bound).
   const double h = std::min({kGroupSpan * t.sd, 0.5 * (g.value - info.lower), 0.5 * (info.upper - g.value)});
   g.lo = g.value - h;
   g.hi = g.value + h;
-  const Vector3 mid = predict_mean(pieces, durations, model.robot, effects, nullptr, heading0_rad);
+  // The mean at the value (list 0) and at each node (list k + 1), in one walk.
+  std::vector<EffectList> lists(kGroupNodes + 1, effects);
   for (int k = 0; k < kGroupNodes; ++k) {
     const double angle = M_PI * (k + 0.5) / kGroupNodes;
     g.nodes[k] = g.value + h * std::cos(angle);
     g.weights[k] = (k % 2 == 0 ? 1.0 : -1.0) * std::sin(angle);
-    parameter = g.nodes[k];
-    g.values[k] = predict_mean(pieces, durations, model.robot, effects, nullptr, heading0_rad) - mid;
+    lists[k + 1][t.effect].values[t.parameter] = g.nodes[k];
   }
+  const std::vector<Vector3> means = predict_means(pieces, durations, model.robot, lists, nullptr, heading0_rad);
+  for (int k = 0; k < kGroupNodes; ++k) g.values[k] = means[k + 1] - means[0];
   return g;
 }
 

@@ -91,6 +91,16 @@ Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<do
                      const Robot& robot, const EffectList& effects,
                      const Vector3* odometry_end_pose = nullptr, double heading0_rad = 0.0);
 
+/// predict_mean for several lists of the same effects with other values (a parameter moved
+/// to several points: group_variation's terms), bit for bit, in one walk over the pieces when
+/// no effect cuts or refines them (each piece's motion is then the same for every list), else
+/// in one walk each.
+std::vector<Vector3> predict_means(const std::vector<ArcSegment>& pieces,
+                                   const std::vector<double>& durations_s, const Robot& robot,
+                                   const std::vector<EffectList>& lists,
+                                   const Vector3* odometry_end_pose = nullptr,
+                                   double heading0_rad = 0.0);
+
 /// The engine's prediction after every piece, for covariance along a trajectory (an encoder
 /// log, one piece per sample): element 0 is the start (all zero), element i the state after
 /// pieces[0 .. i-1]. Same frames and conventions as predict(); `durations_s` as there (each
