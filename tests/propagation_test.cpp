@@ -264,6 +264,52 @@ TEST(Propagation, PredictMeanIsPredictsMeanBitForBit) {
   }
 }
 
+TEST(Propagation, PredictMeansIsPredictMeanForEachList) {
+  // predict_means (group_variation's terms: one parameter at several values) walks the pieces
+  // once for every list when no effect cuts or refines them, and once per list otherwise: either
+  // way each mean is predict_mean's for its list, bit for bit, with the odometry given or not.
+  std::vector<ArcSegment> pieces;
+  std::vector<double> durations;
+  for (int i = 0; i < 300; ++i) {
+    const double s = i < 120 ? 1.0 : (i < 220 ? -1.0 : 0.5);
+    pieces.push_back({s * (0.004 + 1e-5 * (i % 7)), s * 0.0043 - 0.002 * (i % 40 == 0)});
+    durations.push_back(0.01 + 1e-4 * (i % 3));
+  }
+  const Robot robot{0.3, {1e-3, 2e-3}};
+  auto at = [](EffectList list, std::size_t effect, double value) {
+    list[effect].values[0] = value;
+    return list;
+  };
+  const EffectList shared = {{"turn_dependent_wheelbase", {1.01, 1.03}},
+                             {"wheel_diameter_ratio", {0.999}},
+                             {"reference_offset", {0.01, -0.02}}};
+  const EffectList cut = {{"wheelbase_error", {1.02}}, {"backlash", {0.001, 0.002}}};
+  const std::vector<std::vector<EffectList>> cases = {
+      {at(shared, 0, 1.005), at(shared, 0, 1.015), at(shared, 0, 1.01)},
+      {at(shared, 1, 0.998), at(shared, 1, 1.0)},
+      {at(cut, 0, 1.01), at(cut, 0, 1.03)},
+  };
+  for (const double heading0 : {0.0, 0.7}) {
+    for (const std::vector<EffectList>& lists : cases) {
+      const Vector3 odometry = predict(pieces, durations, robot, lists[0], heading0).odometry_end_pose;
+      const std::vector<Vector3> alone = predict_means(pieces, durations, robot, lists, nullptr, heading0);
+      const std::vector<Vector3> given = predict_means(pieces, durations, robot, lists, &odometry, heading0);
+      ASSERT_EQ(alone.size(), lists.size());
+      ASSERT_EQ(given.size(), lists.size());
+      for (std::size_t j = 0; j < lists.size(); ++j) {
+        const Vector3 one = predict_mean(pieces, durations, robot, lists[j], nullptr, heading0);
+        const Vector3 one_given = predict_mean(pieces, durations, robot, lists[j], &odometry, heading0);
+        for (int k = 0; k < 3; ++k) {
+          EXPECT_EQ(alone[j](k), one(k)) << lists[j][0].name << " list " << j << " component " << k;
+          EXPECT_EQ(given[j](k), one_given(k)) << lists[j][0].name << " list " << j << " component " << k;
+        }
+      }
+      // The lists differ, and so do their means: the test compares different numbers.
+      EXPECT_NE(alone[0], alone[1]);
+    }
+  }
+}
+
 TEST(Propagation, TrajectoryTakesThePiecesDurations) {
   // predict_trajectory sees each piece's duration, as predict does: with a speed-dependent
   // custom effect (configs/effects/speed_scale.yaml's world) its last element is predict's

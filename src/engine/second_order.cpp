@@ -593,22 +593,34 @@ Prediction predict_second_order(const std::vector<ArcSegment>& pieces, const Rob
   return predict_second_order(pieces, {}, robot, effects);
 }
 
+CoarsePieces coarsen(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                     double wheelbase_m) {
+  CoarsePieces out;
+  out.wheelbase_m = wheelbase_m;
+  out.pieces = coarsen_pieces(pieces, wheelbase_m, durations_s, &out.durations_s);
+  return out;
+}
+
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
-                              const EffectList& effects, int order, double heading0_rad) {
+                              const EffectList& effects, int order, double heading0_rad,
+                              const CoarsePieces* coarse) {
   if (order == 1) return predict(pieces, durations_s, robot, effects, heading0_rad);
-  std::vector<double> coarse_durations;
-  const std::vector<ArcSegment> coarse =
-      coarsen_pieces(pieces, robot.wheelbase_m, durations_s, &coarse_durations);
-  if (coarse.size() == pieces.size()) {
+  CoarsePieces here;
+  if (coarse == nullptr || coarse->wheelbase_m != robot.wheelbase_m) {
+    here = coarsen(pieces, durations_s, robot.wheelbase_m);
+    coarse = &here;
+  }
+  if (coarse->pieces.size() == pieces.size()) {
     return predict_second_order(pieces, durations_s, robot, effects, heading0_rad);
   }
   // Fine pieces (a logged run): the first order on them, with every piece's duration, and only
   // the order-2 correction (second minus first order) on the coarsened pieces, timed when the
   // pieces are (an effect may depend on the speed).
   Prediction out = predict(pieces, durations_s, robot, effects, heading0_rad);
-  const Prediction coarse2 = predict_second_order(coarse, coarse_durations, robot, effects, heading0_rad);
-  const Prediction coarse1 = predict(coarse, coarse_durations, robot, effects, heading0_rad);
+  const Prediction coarse2 =
+      predict_second_order(coarse->pieces, coarse->durations_s, robot, effects, heading0_rad);
+  const Prediction coarse1 = predict(coarse->pieces, coarse->durations_s, robot, effects, heading0_rad);
   out.noise_mean += coarse2.mean + coarse2.noise_mean - coarse1.mean - coarse1.noise_mean;
   out.cov += coarse2.cov - coarse1.cov;
   return out;

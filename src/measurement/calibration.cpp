@@ -611,13 +611,15 @@ struct ResidualCache::Store {
     return it->second.value;
   }
   const Suite* suite;
+  CoarseRuns coarse;  // the logged runs' coarse pieces, made once for every model
   std::map<std::string, Entry<Residuals>> by_model;
   std::map<std::string, Entry<Comparison>> comparisons;  // by model, alpha and the referee's options
   std::int64_t computed = 0;
   std::int64_t generation = 0;
 };
 
-ResidualCache::ResidualCache(const Suite& suite) : store_(std::make_shared<Store>(Store{&suite, {}, {}, 0, 0})) {}
+ResidualCache::ResidualCache(const Suite& suite)
+    : store_(std::make_shared<Store>(Store{&suite, coarsen_logged_runs(suite), {}, {}, 0, 0})) {}
 
 void ResidualCache::age() {
   auto drop_unused = [this](auto& map) {
@@ -643,7 +645,7 @@ std::int64_t ResidualCache::computed() const { return store_->computed; }
 
 std::vector<std::vector<RunResidual>> ResidualCache::evaluate(const SuiteModel& model) {
   ++store_->computed;
-  Residuals all = residuals(*store_->suite, model);
+  Residuals all = residuals(*store_->suite, model, &store_->coarse);
   return keep_.empty() ? all : select_experiments(all, keep_);
 }
 
@@ -652,7 +654,7 @@ const std::vector<std::vector<RunResidual>>& ResidualCache::full(const SuiteMode
   return store_->get(store_->by_model, model_key(model), [&] {
     if (counter) ++*counter;
     ++store_->computed;
-    return residuals(*store_->suite, model);
+    return residuals(*store_->suite, model, &store_->coarse);
   });
 }
 

@@ -104,7 +104,20 @@ std::string second_order_problem(const Suite& suite, int order) {
   return "";
 }
 
-std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model) {
+CoarseRuns coarsen_logged_runs(const Suite& suite) {
+  CoarseRuns out(suite.experiments.size());
+  for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
+    const SuiteExperiment& ex = suite.experiments[e];
+    if (!ex.logged) continue;
+    for (const SuiteRun& run : ex.runs) {
+      out[e].push_back(coarsen(run.pieces, run.durations_s, suite.robot.wheelbase_m));
+    }
+  }
+  return out;
+}
+
+std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model,
+                                                const CoarseRuns* coarse) {
   const Matrix3 meas = model.measurement_noise.covariance();
   const GroupTarget target = group_target(model.effects);
   // With an effect that uses the absolute heading every run is predicted from its own start
@@ -148,7 +161,8 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     }
     const SuiteRun& run = ex.runs[r];
     const Prediction p = predict_with_order(run.pieces, run.durations_s, model.robot, model.effects,
-                                            model.order, run.heading0_rad);
+                                            model.order, run.heading0_rad,
+                                            coarse != nullptr ? &(*coarse)[e][r] : nullptr);
     const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects, target,
                                      p.mean, &p.odometry_end_pose, run.heading0_rad);
     out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,

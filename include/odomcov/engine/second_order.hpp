@@ -65,6 +65,16 @@ std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, do
                                        const std::vector<double>& durations_s,
                                        std::vector<double>* coarse_durations_s);
 
+/// Pieces coarsened once (coarsen_pieces at `wheelbase_m`, with their durations when the fine
+/// pieces have them): a logged run's, for predict_with_order to reuse at every evaluation.
+struct CoarsePieces {
+  double wheelbase_m = 0.0;
+  std::vector<ArcSegment> pieces;
+  std::vector<double> durations_s;
+};
+CoarsePieces coarsen(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                     double wheelbase_m);
+
 /// The model of the given order (1: predict, the first-order engine; 2: the order-2 model) for
 /// any pieces. For order 2 on fine pieces (a logged run), the first order is taken on the fine
 /// pieces and only the higher-order correction on coarsened ones:
@@ -73,9 +83,12 @@ std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, do
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot& robot,
                               const EffectList& effects, int order);
 /// The same with each piece's duration (logged runs: the log's t column; planned paths:
-/// model_pieces), which motion-dependent effects use.
+/// model_pieces), which motion-dependent effects use. `coarse`, when given, is coarsen() of the
+/// same pieces and durations, used when made at the robot's wheelbase (the same numbers as
+/// coarsening them here).
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
-                              const EffectList& effects, int order, double heading0_rad = 0.0);
+                              const EffectList& effects, int order, double heading0_rad = 0.0,
+                              const CoarsePieces* coarse = nullptr);
 
 }  // namespace odomcov

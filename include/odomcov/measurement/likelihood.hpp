@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "odomcov/engine/second_order.hpp"
 #include "odomcov/measurement/suite.hpp"
 
 namespace odomcov {
@@ -43,7 +44,16 @@ struct RunResidual {
 /// prediction, unless an effect of the model uses the absolute heading (effect_needs): then
 /// each run is predicted from its own start heading (SuiteRun::heading0_rad), as logged runs
 /// always are.
-std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model);
+/// `coarse`, when given, is coarsen_logged_runs(suite): the logged runs' coarse pieces, made
+/// once for every evaluation (the same numbers as without).
+using CoarseRuns = std::vector<std::vector<CoarsePieces>>;
+std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model,
+                                                const CoarseRuns* coarse = nullptr);
+
+/// Every logged run's pieces coarsened at the suite's wheelbase (coarsen: what the order-2
+/// correction is taken on), indexed as the suite's experiments and runs; planned-path
+/// experiments get no entries.
+CoarseRuns coarsen_logged_runs(const Suite& suite);
 
 /// "" when every experiment's order-2 prediction stays within kMaxSecondOrderPieces
 /// (limits.hpp; its cost is quadratic), else which experiment exceeds it, for the pieces of the
