@@ -9,6 +9,8 @@
 #include <limits>
 #include <map>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "odomcov/closed_form/limits.hpp"
 #include "odomcov/engine/propagation.hpp"
@@ -106,13 +108,18 @@ std::string second_order_problem(const Suite& suite, int order) {
 
 CoarseRuns coarsen_logged_runs(const Suite& suite) {
   CoarseRuns out(suite.experiments.size());
+  std::vector<std::pair<std::size_t, std::size_t>> runs;  // (experiment, run), in parallel below
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     const SuiteExperiment& ex = suite.experiments[e];
     if (!ex.logged) continue;
-    for (const SuiteRun& run : ex.runs) {
-      out[e].push_back(coarsen(run.pieces, run.durations_s, suite.robot.wheelbase_m));
-    }
+    out[e].resize(ex.runs.size());
+    for (std::size_t r = 0; r < ex.runs.size(); ++r) runs.emplace_back(e, r);
   }
+  tbb::parallel_for(std::size_t{0}, runs.size(), [&](std::size_t i) {
+    const auto [e, r] = runs[i];
+    const SuiteRun& run = suite.experiments[e].runs[r];
+    out[e][r] = coarsen(run.pieces, run.durations_s, suite.robot.wheelbase_m);
+  });
   return out;
 }
 
