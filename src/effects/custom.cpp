@@ -255,7 +255,7 @@ class Custom final : public effects::Effect {
   /// the nominal evaluator (as its random parameters are set) composed with `others`.
   Eigen::Vector3d piece_motion(const effects::PieceModel& piece, const effects::Systematic& others) const {
     effects::Systematic s = others;
-    fold(nominal_, piece.motion, s);
+    fold(nominal_, *piece.motion, s);
     const ArcSegment travel = s.travel(piece.encoder.left_m, piece.encoder.right_m);
     const double mean_travel = 0.5 * (std::abs(piece.encoder.left_m) + std::abs(piece.encoder.right_m));
     return {travel.heading_change_rad(s.wheelbase_factor * piece.wheelbase_m), travel.center_m(),

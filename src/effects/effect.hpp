@@ -166,7 +166,7 @@ struct PieceModel {
   ArcSegment encoder;        // input: encoder travel over the piece
   double wheelbase_m = 0.0;  // input: nominal wheelbase
   WheelNoise noise;          // input: the model's wheel noise constants
-  Motion motion;             // input: the piece's motion
+  const Motion* motion = nullptr;  // input: the piece's motion (the walker's, for the call)
   double scale_left = 1.0;   // input, systematic: true travel = scale x encoder (+ offset)
   double scale_right = 1.0;
   double wheelbase_factor = 1.0;  // input, systematic: true wheelbase = factor x nominal

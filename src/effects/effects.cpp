@@ -239,7 +239,7 @@ Motion MotionTracker::next(double dL_m, double dR_m, double dt_s, std::int64_t c
 Systematic others_systematic(const PieceModel& piece, const Effect* self) {
   Systematic s;
   for (const auto& e : *piece.effects) {
-    if (e.get() != self) e->systematic(piece.motion, s);
+    if (e.get() != self) e->systematic(*piece.motion, s);
   }
   return s;
 }

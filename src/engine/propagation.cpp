@@ -191,7 +191,7 @@ ResolvedPath resolve(const std::vector<ArcSegment>& encoder_pieces,
   for_each_piece(encoder_pieces, durations_s, B, heading0_rad, active,
                  [&](const ArcSegment& encoder, const Motion& motion, const Systematic& sys) {
     m.encoder = encoder;
-    if (!active.empty()) m.motion = motion;  // only the effects read it
+    m.motion = &motion;  // only the effects read it, within this call
     m.scale_left = sys.scale_left;
     m.scale_right = sys.scale_right;
     m.wheelbase_factor = sys.wheelbase_factor;
