@@ -236,17 +236,23 @@ TEST(Propagation, IncrementJacobianIsFirstOrderPerturbation) {
   }
 }
 
+/// A logged run's pieces for the mean's bit-for-bit tests: 400 samples of 10 ms, forward, then
+/// backward (both wheels reverse), then forward at half the travel, with a kink every 50.
+void reversing_log(std::vector<ArcSegment>& pieces, std::vector<double>& durations) {
+  for (int i = 0; i < 400; ++i) {
+    const double s = i < 150 ? 1.0 : (i < 300 ? -1.0 : 0.5);
+    pieces.push_back({s * (0.004 + 1e-5 * (i % 7)), s * 0.0043 - 0.002 * (i % 50 == 0)});
+    durations.push_back(0.01);
+  }
+}
+
 TEST(Propagation, PredictMeanIsPredictsMeanBitForBit) {
   // predict_mean (the mean alone, for group_variation's column) streams resolve's pieces through
   // the same arithmetic as predict: the same bits, with history effects (backlash cuts pieces),
   // motion-dependent ones and a measurement hook, on pieces with reversals.
   std::vector<ArcSegment> pieces;
   std::vector<double> durations;
-  for (int i = 0; i < 400; ++i) {
-    const double s = i < 150 ? 1.0 : (i < 300 ? -1.0 : 0.5);
-    pieces.push_back({s * (0.004 + 1e-5 * (i % 7)), s * 0.0043 - 0.002 * (i % 50 == 0)});
-    durations.push_back(0.01);
-  }
+  reversing_log(pieces, durations);
   const Robot robot{0.3, {1e-3, 2e-3}};
   const std::vector<EffectList> models = {
       {},
@@ -270,11 +276,7 @@ TEST(Propagation, PredictMeansIsPredictMeanForEachList) {
   // way each mean is predict_mean's for its list, bit for bit, with the odometry given or not.
   std::vector<ArcSegment> pieces;
   std::vector<double> durations;
-  for (int i = 0; i < 300; ++i) {
-    const double s = i < 120 ? 1.0 : (i < 220 ? -1.0 : 0.5);
-    pieces.push_back({s * (0.004 + 1e-5 * (i % 7)), s * 0.0043 - 0.002 * (i % 40 == 0)});
-    durations.push_back(0.01 + 1e-4 * (i % 3));
-  }
+  reversing_log(pieces, durations);
   const Robot robot{0.3, {1e-3, 2e-3}};
   auto at = [](EffectList list, std::size_t effect, double value) {
     list[effect].values[0] = value;

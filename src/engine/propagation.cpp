@@ -410,45 +410,41 @@ bool walks_plainly(const std::vector<std::unique_ptr<effects::Effect>>& active) 
 Vector3 predict_mean(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                      const Robot& robot, const EffectList& effect_list,
                      const Vector3* odometry_end_pose, double heading0_rad) {
-  // resolve's pieces, streamed: only their true arcs (the same arithmetic), nothing stored.
-  auto active = effects::instantiate(effect_list);
-  MeanWalk walk(robot.wheelbase_m, odometry_end_pose);
-  effects::for_each_piece(pieces, durations_s, robot.wheelbase_m, heading0_rad, active,
-                          [&](const ArcSegment& encoder, const effects::Motion&,
-                              const effects::Systematic& sys) { walk.step(encoder, sys); });
-  return walk.error(active);
+  return predict_means(pieces, durations_s, robot, {effect_list}, odometry_end_pose, heading0_rad)[0];
 }
 
 std::vector<Vector3> predict_means(const std::vector<ArcSegment>& pieces,
                                    const std::vector<double>& durations_s, const Robot& robot,
                                    const std::vector<EffectList>& lists,
                                    const Vector3* odometry_end_pose, double heading0_rad) {
+  // resolve's pieces, streamed: only their true arcs (the same arithmetic), nothing stored.
+  const double B = robot.wheelbase_m;
   std::vector<std::vector<std::unique_ptr<effects::Effect>>> active;
   for (const EffectList& list : lists) active.push_back(effects::instantiate(list));
+  std::vector<MeanWalk> walks(lists.size(), MeanWalk(B, odometry_end_pose));
   const bool shared = std::all_of(active.begin(), active.end(),
                                   [](const auto& a) { return !a.empty() && walks_plainly(a); });
-  std::vector<Vector3> out;
-  if (!shared) {
-    for (const EffectList& list : lists) {
-      out.push_back(predict_mean(pieces, durations_s, robot, list, odometry_end_pose, heading0_rad));
-    }
-    return out;
-  }
-  // The PieceWalker's plain path (one motion per piece, every effect's terms folded in), with
-  // each piece's motion computed once for every list.
-  const double B = robot.wheelbase_m;
-  std::vector<MeanWalk> walks(lists.size(), MeanWalk(B, odometry_end_pose));
-  effects::MotionTracker tracker(B, heading0_rad);
-  for (std::size_t i = 0; i < pieces.size(); ++i) {
-    const ArcSegment& encoder = pieces[i];
-    const effects::Motion motion =
-        tracker.next(encoder.left_m, encoder.right_m, durations_s.empty() ? std::nan("") : durations_s[i]);
+  if (shared) {
+    // The first list's walk hands each piece's motion to the others: with no cuts it is the
+    // motion each list's own walk would compute.
+    effects::for_each_piece(pieces, durations_s, B, heading0_rad, active[0],
+                            [&](const ArcSegment& encoder, const effects::Motion& motion,
+                                const effects::Systematic& sys) {
+      walks[0].step(encoder, sys);
+      for (std::size_t j = 1; j < walks.size(); ++j) {
+        effects::Systematic own;
+        for (const auto& e : active[j]) e->systematic(motion, own);
+        walks[j].step(encoder, own);
+      }
+    });
+  } else {
     for (std::size_t j = 0; j < walks.size(); ++j) {
-      effects::Systematic sys;
-      for (const auto& e : active[j]) e->systematic(motion, sys);
-      walks[j].step(encoder, sys);
+      effects::for_each_piece(pieces, durations_s, B, heading0_rad, active[j],
+                              [&](const ArcSegment& encoder, const effects::Motion&,
+                                  const effects::Systematic& sys) { walks[j].step(encoder, sys); });
     }
   }
+  std::vector<Vector3> out;
   for (std::size_t j = 0; j < walks.size(); ++j) out.push_back(walks[j].error(active[j]));
   return out;
 }
