@@ -114,6 +114,46 @@ TEST(CrossValidation, HeldOutLikelihoodOfIndependentRunsIsTheirOwnDensity) {
   }
 }
 
+TEST(CrossValidation, AViewAndTheWholeSuiteShareOnePropagation) {
+  // A fold's fit asks its training view for residuals at points no one else asks for; its
+  // held-out score then asks for the whole suite at the fitted point. The store propagates
+  // only what is missing each time, and every experiment's residuals are residuals()'s, bit for
+  // bit, with the group indices of the whole suite.
+  Suite lab = test::synth_suite(load_world(kStandard), "cv_partial");
+  for (std::size_t i = 0; i < lab.experiments.size(); ++i) lab.experiments[i].group = i % 2 == 0 ? "day-1" : "day-2";
+  SuiteModel model = suite_model(lab);
+  model.effects.push_back({"scale_error", {1.002}});
+  model.effects.push_back({kGroupVariation, {0.002}, "scale_error.Es"});
+  const std::vector<std::vector<RunResidual>> direct = residuals(lab, model);
+  const Folds folds = make_folds(lab);
+  ASSERT_GE(folds.size(), 2u);
+  ResidualCache cache(lab);
+  const std::vector<bool> training = folds.training(0);
+  ResidualCache view(cache, training);
+  view.at(model);
+  EXPECT_EQ(cache.computed(), 1);
+  const auto& all = cache.full(model);
+  EXPECT_EQ(cache.computed(), 2);  // the held-out experiments only
+  cache.full(model);
+  ResidualCache(cache, folds.training(1)).at(model);
+  EXPECT_EQ(cache.computed(), 2);  // nothing is missing any more
+  ASSERT_EQ(all.size(), direct.size());
+  for (std::size_t e = 0; e < all.size(); ++e) {
+    ASSERT_EQ(all[e].size(), direct[e].size()) << e;
+    for (std::size_t r = 0; r < all[e].size(); ++r) {
+      EXPECT_EQ(all[e][r].error, direct[e][r].error) << e;
+      EXPECT_EQ(all[e][r].mean, direct[e][r].mean) << e;
+      EXPECT_EQ(all[e][r].cov, direct[e][r].cov) << e;
+      EXPECT_EQ(all[e][r].group, direct[e][r].group) << e;
+      EXPECT_EQ(all[e][r].group_column, direct[e][r].group_column) << e;
+    }
+  }
+  // Two groups, so the indices carry something to check.
+  EXPECT_TRUE(std::any_of(direct.begin(), direct.end(), [&](const auto& ex) {
+    return !ex.empty() && ex.front().group != direct.front().front().group;
+  }));
+}
+
 TEST(CrossValidation, TheCacheKeepsVerdictsAndForgetsWhatARoundDidNotRead) {
   // calibrate shares one cache over its rounds: a verdict read twice is the referee's once, and
   // is the verdict a new compare gives (the referee is seeded); what a round did not read is

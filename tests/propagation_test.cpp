@@ -270,6 +270,40 @@ TEST(Propagation, PredictMeanIsPredictsMeanBitForBit) {
   }
 }
 
+TEST(Propagation, AGivenOdometryIsTheWalkBitForBit) {
+  // The odometry depends on the encoders alone: predict takes a logged run's odometry_walk,
+  // computed once, instead of walking it again at every evaluation, and gives the same bits.
+  // Where an effect cuts the pieces (backlash at the reversals) it walks the odometry itself,
+  // so even a wrong pose given there changes nothing.
+  std::vector<ArcSegment> pieces;
+  std::vector<double> durations;
+  reversing_log(pieces, durations);
+  const Robot robot{0.3, {1e-3, 2e-3}};
+  const Vector3 walked = odometry_walk(pieces, robot.wheelbase_m);
+  const Vector3 wrong = walked + Vector3(1.0, -2.0, 0.5);
+  const std::vector<std::pair<EffectList, bool>> models = {
+      {{}, true},
+      {{{"turn_dependent_wheelbase", {1.01, 1.03}}, {"reference_offset", {0.01, -0.02}}}, true},
+      {{{"scale_error", {0.99}}, {"arc_skid", {0.002}}, {"per_run_radius", {0.001}}, {"acceleration_slip", {0.01}}}, true},
+      {{{"wheelbase_error", {1.02}}, {"backlash", {0.001, 0.002}}}, false},
+  };
+  for (const double heading0 : {0.0, 0.7}) {
+    for (const auto& [effects, uncut] : models) {
+      const Prediction own = predict(pieces, durations, robot, effects, heading0);
+      const Prediction given = predict(pieces, durations, robot, effects, heading0, uncut ? &walked : &wrong);
+      if (uncut) EXPECT_EQ(own.odometry_end_pose, walked) << effects.size();
+      EXPECT_EQ(given.odometry_end_pose, own.odometry_end_pose) << effects.size();
+      EXPECT_EQ(given.mean, own.mean) << effects.size();
+      EXPECT_EQ(given.noise_mean, own.noise_mean) << effects.size();
+      EXPECT_EQ(given.cov, own.cov) << effects.size();
+      EXPECT_EQ(given.true_end_pose, own.true_end_pose) << effects.size();
+    }
+  }
+  // The effects moved the true path, so the odometry's shortcut (reusing the true piece's
+  // angle functions) was not what made the two walks agree.
+  EXPECT_NE(predict(pieces, durations, robot, models[1].first).true_end_pose, walked);
+}
+
 TEST(Propagation, PredictMeansIsPredictMeanForEachList) {
   // predict_means (group_variation's terms: one parameter at several values) walks the pieces
   // once for every list when no effect cuts or refines them, and once per list otherwise: either

@@ -264,6 +264,20 @@ class PoseWalker {
   int count_ = 0;
 };
 
+/// Moves the odometry by one encoder piece. The odometry's arcs are the encoder's own, at the
+/// nominal wheelbase B; `f` (the angle functions of the true piece of travel d, angle a and
+/// lateral slip l) is reused when the true piece is the encoder's, which gives the same bits as
+/// computing them again.
+void step_odometry(PoseWalker& odometry, const ArcSegment& encoder, double B, double d, double a, double l,
+                   const detail::ArcStep& f) {
+  const double d_odometry = encoder.center_m(), a_odometry = encoder.heading_change_rad(B);
+  if (d_odometry == d && a_odometry == a && l == 0.0) {
+    odometry.step(d, f);
+  } else {
+    odometry.step(d_odometry, detail::ArcStep(a_odometry));
+  }
+}
+
 /// phi P phi^T for the arc transition phi = [c s y; -s c x; 0 0 1] (arc_transition, with the
 /// lateral slip l in its third column) and a symmetric P, written out: the zeros and ones of phi
 /// cost nothing.
@@ -294,12 +308,19 @@ Matrix3 transition_congruence(const detail::ArcStep& f, double d, double l, cons
 }
 
 /// The engine's loop; `each` (when not nullptr) sees the prediction after every piece.
+/// `odometry_end_pose`, when given, is odometry_walk(pieces, B), used instead of walking the
+/// odometry again when the effects did not cut the pieces (then every resolved piece's encoder
+/// arc is the given piece, and the walk would give the same bits).
 template <class Each>
 Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                     const Robot& robot, const EffectList& effect_list, double heading0_rad, Each&& each) {
+                     const Robot& robot, const EffectList& effect_list, double heading0_rad, Each&& each,
+                     const Vector3* odometry_end_pose = nullptr) {
   const effects::ResolvedPath path = effects::resolve(pieces, durations_s, robot, effect_list, heading0_rad);
   const int constants = path.run_constants;
   const double B = robot.wheelbase_m;
+  constexpr bool kEachPiece = !std::is_same_v<std::decay_t<Each>, std::nullptr_t>;
+  // Cuts only add pieces, so the same count means none was cut.
+  const bool odometry_known = !kEachPiece && odometry_end_pose != nullptr && path.pieces.size() == pieces.size();
 
   Prediction out;
   Matrix3 P = Matrix3::Zero();                          // tangential, along the true path
@@ -332,25 +353,19 @@ Prediction propagate(const std::vector<ArcSegment>& pieces, const std::vector<do
     noise_mean += detail::noise_mean_of_piece(true_pose.rotation(), d, l, a, undamped, v0, P(2, 2) - v0,
                                               r.intensity(0, 1));
     true_pose.step(d, f, l);
-    // The odometry's piece: the same arc unless a systematic effect changed the true one.
-    const double d_odometry = r.encoder.center_m(), a_odometry = r.encoder.heading_change_rad(B);
-    if (d_odometry == d && a_odometry == a && l == 0.0) {
-      odometry.step(d, f);
-    } else {
-      odometry.step(d_odometry, detail::ArcStep(a_odometry));
-    }
-    if constexpr (!std::is_same_v<std::decay_t<Each>, std::nullptr_t>) {
+    if (!odometry_known) step_odometry(odometry, r.encoder, B, d, a, l, f);
+    if constexpr (kEachPiece) {
       each(Prediction{pose_error(true_pose.pose(), odometry.pose()),
                       {noise_mean.real(), noise_mean.imag(), 0.0},
                       tangential_to_world(P, true_pose.pose().z()), odometry.pose(), true_pose.pose()});
     }
   }
-  out.odometry_end_pose = odometry.pose();
+  out.odometry_end_pose = odometry_known ? *odometry_end_pose : odometry.pose();
   out.true_end_pose = true_pose.pose();
   out.cov = tangential_to_world(P, true_pose.pose().z());
   Vector3 measured = true_pose.pose();
   path.measure(measured, out.cov);  // what the external reference sees (reference_offset)
-  out.mean = pose_error(measured, odometry.pose());
+  out.mean = pose_error(measured, out.odometry_end_pose);
   out.noise_mean = {noise_mean.real(), noise_mean.imag(), 0.0};
   return out;
 }
@@ -372,13 +387,7 @@ class MeanWalk {
     const double lateral = sys.lateral * 0.5 * (std::abs(encoder.left_m) + std::abs(encoder.right_m));
     const detail::ArcStep f(angle);
     true_pose_.step(center, f, lateral);
-    if (odometry_end_pose_ != nullptr) return;
-    const double d_odometry = encoder.center_m(), a_odometry = encoder.heading_change_rad(B_);
-    if (d_odometry == center && a_odometry == angle && lateral == 0.0) {
-      odometry_.step(center, f);
-    } else {
-      odometry_.step(d_odometry, detail::ArcStep(a_odometry));
-    }
+    if (odometry_end_pose_ == nullptr) step_odometry(odometry_, encoder, B_, center, angle, lateral, f);
   }
 
   /// The end pose error as the external reference sees it (the effects' measurement hooks).
@@ -455,8 +464,17 @@ Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
 }
 
 Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                   const Robot& robot, const EffectList& effect_list, double heading0_rad) {
-  return propagate(pieces, durations_s, robot, effect_list, heading0_rad, nullptr);
+                   const Robot& robot, const EffectList& effect_list, double heading0_rad,
+                   const Vector3* odometry_end_pose) {
+  return propagate(pieces, durations_s, robot, effect_list, heading0_rad, nullptr, odometry_end_pose);
+}
+
+Vector3 odometry_walk(const std::vector<ArcSegment>& pieces, double wheelbase_m) {
+  PoseWalker odometry;  // step_odometry with nothing to reuse
+  for (const ArcSegment& encoder : pieces) {
+    odometry.step(encoder.center_m(), detail::ArcStep(encoder.heading_change_rad(wheelbase_m)));
+  }
+  return odometry.pose();
 }
 
 std::vector<Prediction> predict_trajectory(const std::vector<ArcSegment>& pieces,

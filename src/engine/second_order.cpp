@@ -598,6 +598,7 @@ CoarsePieces coarsen(const std::vector<ArcSegment>& pieces, const std::vector<do
   CoarsePieces out;
   out.wheelbase_m = wheelbase_m;
   out.pieces = coarsen_pieces(pieces, wheelbase_m, durations_s, &out.durations_s);
+  out.odometry_end_pose = odometry_walk(pieces, wheelbase_m);
   return out;
 }
 
@@ -605,9 +606,12 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
                               const EffectList& effects, int order, double heading0_rad,
                               const CoarsePieces* coarse) {
-  if (order == 1) return predict(pieces, durations_s, robot, effects, heading0_rad);
+  const bool given_usable = coarse != nullptr && coarse->wheelbase_m == robot.wheelbase_m;
+  if (order == 1) {
+    return predict(pieces, durations_s, robot, effects, heading0_rad, given_usable ? &coarse->odometry_end_pose : nullptr);
+  }
   CoarsePieces here;
-  if (coarse == nullptr || coarse->wheelbase_m != robot.wheelbase_m) {
+  if (!given_usable) {
     here = coarsen(pieces, durations_s, robot.wheelbase_m);
     coarse = &here;
   }
@@ -617,7 +621,7 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
   // Fine pieces (a logged run): the first order on them, with every piece's duration, and only
   // the order-2 correction (second minus first order) on the coarsened pieces, timed when the
   // pieces are (an effect may depend on the speed).
-  Prediction out = predict(pieces, durations_s, robot, effects, heading0_rad);
+  Prediction out = predict(pieces, durations_s, robot, effects, heading0_rad, &coarse->odometry_end_pose);
   const Prediction coarse2 =
       predict_second_order(coarse->pieces, coarse->durations_s, robot, effects, heading0_rad);
   const Prediction coarse1 = predict(coarse->pieces, coarse->durations_s, robot, effects, heading0_rad);

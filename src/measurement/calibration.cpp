@@ -610,9 +610,45 @@ struct ResidualCache::Store {
     it->second.used = generation;
     return it->second.value;
   }
+  /// A model's residuals, filled in experiment by experiment as requests need them.
+  struct Partial {
+    Residuals value;
+    std::vector<bool> have;
+  };
+  /// The residuals of `model` (its model_key) with at least the experiments `need` marks
+  /// (nullptr: every one) computed; only the missing ones are propagated. A fold's fit asks for
+  /// its training experiments, its held-out score for the rest: together one propagation of
+  /// the suite. (residuals: the marked experiments get the same numbers as a whole propagation.)
+  const Residuals& residuals_of(const SuiteModel& model, const std::string& key, const std::vector<bool>* need,
+                                std::atomic<std::int64_t>* counter) {
+    const std::size_t n = suite->experiments.size();
+    auto it = by_model.find(key);
+    if (it == by_model.end()) {
+      it = by_model.emplace(key, Entry<Partial>{{Residuals(n), std::vector<bool>(n, false)}, generation}).first;
+    }
+    it->second.used = generation;
+    Partial& p = it->second.value;
+    std::vector<bool> missing(n, false);
+    bool any = false;
+    for (std::size_t e = 0; e < n; ++e) {
+      missing[e] = (need == nullptr || (*need)[e]) && !p.have[e];
+      any = any || missing[e];
+    }
+    if (any) {
+      if (counter) ++*counter;
+      ++computed;
+      Residuals fresh = residuals(*suite, model, &coarse, &missing);
+      for (std::size_t e = 0; e < n; ++e) {
+        if (!missing[e]) continue;
+        p.value[e] = std::move(fresh[e]);
+        p.have[e] = true;
+      }
+    }
+    return p.value;
+  }
   const Suite* suite;
   CoarseRuns coarse;  // the logged runs' coarse pieces, made once for every model
-  std::map<std::string, Entry<Residuals>> by_model;
+  std::map<std::string, Entry<Partial>> by_model;
   std::map<std::string, Entry<Comparison>> comparisons;  // by model, alpha and the referee's options
   std::int64_t computed = 0;
   std::int64_t generation = 0;
@@ -645,17 +681,13 @@ std::int64_t ResidualCache::computed() const { return store_->computed; }
 
 std::vector<std::vector<RunResidual>> ResidualCache::evaluate(const SuiteModel& model) {
   ++store_->computed;
-  Residuals all = residuals(*store_->suite, model, &store_->coarse);
-  return keep_.empty() ? all : select_experiments(all, keep_);
+  if (keep_.empty()) return residuals(*store_->suite, model, &store_->coarse);
+  return select_experiments(residuals(*store_->suite, model, &store_->coarse, &keep_), keep_);
 }
 
 const std::vector<std::vector<RunResidual>>& ResidualCache::full(const SuiteModel& model,
                                                                  std::atomic<std::int64_t>* counter) {
-  return store_->get(store_->by_model, model_key(model), [&] {
-    if (counter) ++*counter;
-    ++store_->computed;
-    return residuals(*store_->suite, model, &store_->coarse);
-  });
+  return store_->residuals_of(model, model_key(model), nullptr, counter);
 }
 
 const std::vector<std::vector<RunResidual>>& ResidualCache::at(const SuiteModel& model,
@@ -664,7 +696,8 @@ const std::vector<std::vector<RunResidual>>& ResidualCache::at(const SuiteModel&
   const std::string key = model_key(model);
   auto it = subsets_.find(key);
   if (it != subsets_.end()) return it->second;
-  return subsets_.emplace(key, select_experiments(full(model, counter), keep_)).first->second;
+  return subsets_.emplace(key, select_experiments(store_->residuals_of(model, key, &keep_, counter), keep_))
+      .first->second;
 }
 
 const Comparison& ResidualCache::comparison(const SuiteModel& model, double alpha,

@@ -124,7 +124,7 @@ CoarseRuns coarsen_logged_runs(const Suite& suite) {
 }
 
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model,
-                                                const CoarseRuns* coarse) {
+                                                const CoarseRuns* coarse, const std::vector<bool>* only) {
   const Matrix3 meas = model.measurement_noise.covariance();
   const GroupTarget target = group_target(model.effects);
   // With an effect that uses the absolute heading every run is predicted from its own start
@@ -143,6 +143,7 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     const SuiteExperiment& ex = suite.experiments[e];
     group_of[e] = groups.emplace(group_key(ex), static_cast<int>(groups.size())).first->second;
+    if (only != nullptr && !(e < only->size() && (*only)[e])) continue;
     out[e].resize(ex.runs.size());
     if (!ex.logged && !per_run) {
       work.emplace_back(e, 0);

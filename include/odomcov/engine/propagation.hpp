@@ -77,10 +77,19 @@ struct Prediction {
 ///    with the heading error as the travel does (arc kernels with a lateral slip).
 ///  * `heading0_rad`: the run's start heading in the reference's frame, which effects that use
 ///    the absolute heading see (custom effects' `heading`; 0 where unknown).
+///  * The odometry depends on the encoders and the nominal wheelbase only:
+///    `odometry_end_pose`, when given, is odometry_walk(pieces, robot.wheelbase_m) (a logged
+///    run's, computed once), and is used instead of walking the odometry again where that
+///    would give the same bits (no effect cut the pieces).
 Prediction predict(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
-                   const Robot& robot, const EffectList& effects, double heading0_rad = 0.0);
+                   const Robot& robot, const EffectList& effects, double heading0_rad = 0.0,
+                   const Vector3* odometry_end_pose = nullptr);
 Prediction predict(const std::vector<ArcSegment>& pieces, const Robot& robot,
                    const EffectList& effects);
+
+/// The odometry's end pose over `pieces` at `wheelbase_m`, as predict integrates it (bit for
+/// bit when no effect cuts the pieces): predict's `odometry_end_pose`.
+Vector3 odometry_walk(const std::vector<ArcSegment>& pieces, double wheelbase_m);
 
 /// predict(...).mean alone, by the same arithmetic (bit for bit), without the covariance and
 /// the noise-induced mean: for derivatives of the systematic mean (group_variation's column).

@@ -66,11 +66,14 @@ std::vector<ArcSegment> coarsen_pieces(const std::vector<ArcSegment>& pieces, do
                                        std::vector<double>* coarse_durations_s);
 
 /// Pieces coarsened once (coarsen_pieces at `wheelbase_m`, with their durations when the fine
-/// pieces have them): a logged run's, for predict_with_order to reuse at every evaluation.
+/// pieces have them): a logged run's, for predict_with_order to reuse at every evaluation. With
+/// them, the odometry's end pose over the fine pieces (odometry_walk at `wheelbase_m`), which
+/// no model changes.
 struct CoarsePieces {
   double wheelbase_m = 0.0;
   std::vector<ArcSegment> pieces;
   std::vector<double> durations_s;
+  Vector3 odometry_end_pose = Vector3::Zero();
 };
 CoarsePieces coarsen(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                      double wheelbase_m);
@@ -85,7 +88,7 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot
 /// The same with each piece's duration (logged runs: the log's t column; planned paths:
 /// model_pieces), which motion-dependent effects use. `coarse`, when given, is coarsen() of the
 /// same pieces and durations, used when made at the robot's wheelbase (the same numbers as
-/// coarsening them here).
+/// coarsening them here; its odometry end pose serves order 1 too).
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const std::vector<double>& durations_s, const Robot& robot,
                               const EffectList& effects, int order, double heading0_rad = 0.0,

@@ -73,7 +73,8 @@ class ResidualCache {
   /// (one flag per experiment of the suite).
   ResidualCache(ResidualCache& parent, std::vector<bool> keep);
   /// The residuals of `model`, computed on the first request (then `counter` is incremented):
-  /// of every experiment, or of the view's.
+  /// of every experiment, or of the view's. The shared store keeps each model's residuals
+  /// experiment by experiment and propagates only those no request has computed yet.
   const std::vector<std::vector<RunResidual>>& at(const SuiteModel& model,
                                                   std::atomic<std::int64_t>* counter = nullptr);
   /// The residuals of every experiment of the suite, whatever the view.
@@ -91,7 +92,8 @@ class ResidualCache {
   /// Forgets what was not read since the previous call (for a cache that outlives a round:
   /// what the next round can reuse is what this one read, so memory stays that of two rounds).
   void age();
-  /// How many propagations of the whole suite the shared store has run.
+  /// How many propagations the shared store has run (each of the experiments a request was
+  /// missing: the whole suite, or a view's part of it).
   std::int64_t computed() const;
   const Suite& suite() const;
 

@@ -45,10 +45,14 @@ struct RunResidual {
 /// each run is predicted from its own start heading (SuiteRun::heading0_rad), as logged runs
 /// always are.
 /// `coarse`, when given, is coarsen_logged_runs(suite): the logged runs' coarse pieces, made
-/// once for every evaluation (the same numbers as without).
+/// once for every evaluation (the same numbers as without). `only`, when given, marks the
+/// experiments to compute (one flag per experiment); the others are left with no runs. A run's
+/// residual does not depend on the others', and group indices count every experiment, so the
+/// marked ones get the same numbers as without.
 using CoarseRuns = std::vector<std::vector<CoarsePieces>>;
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model,
-                                                const CoarseRuns* coarse = nullptr);
+                                                const CoarseRuns* coarse = nullptr,
+                                                const std::vector<bool>* only = nullptr);
 
 /// Every logged run's pieces coarsened at the suite's wheelbase (coarsen: what the order-2
 /// correction is taken on), indexed as the suite's experiments and runs; planned-path
