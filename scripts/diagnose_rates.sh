@@ -52,9 +52,12 @@
 # whose training runs leave a parameter of the model undetermined tests nothing came from the
 # real OptiOdom runs; its blind check is a fifth batch, undetermined 21012028 (72 worlds of
 # turn_dependent_wheelbase with each other effect and alone: its arc wheelbase is determined by
-# the arcs alone), run once with the method unchanged.
-#   scripts/diagnose_rates.sh            # the five batches
-#   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, undetermined, or pilot (16 worlds)
+# the arcs alone), run once with the method unchanged; and a sixth, weak 22012028 (the same with
+# the squares' corners turned on arcs, so that the squares determine the arc wheelbase weakly, as
+# OptiOdom's do), run once, with the rule and (for the comparison in results/diagnose/README.md)
+# without it.
+#   scripts/diagnose_rates.sh            # the six batches
+#   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, undetermined, weak, or pilot (16 worlds)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
@@ -62,7 +65,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="$root/results/diagnose"
 work="$root/build/diagnose_rates"
 mkdir -p "$out" "$work"
-parts=("${@:-mixed none group open undetermined}")
+parts=("${@:-mixed none group open undetermined weak}")
 want() { [[ " ${parts[*]} " == *" $1 "* ]]; }
 run() {  # name seed worlds cases
   rm -rf "${work:?}/$1"
@@ -76,5 +79,6 @@ if want none; then run none 17012028 200 none; fi
 if want group; then run group 18012028 60 group; fi
 if want open; then run open 19012028 40 open; fi
 if want undetermined; then run undetermined 21012028 72 undetermined; fi
+if want weak; then run weak 22012028 72 weak; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2
