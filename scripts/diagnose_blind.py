@@ -54,6 +54,12 @@ and the run must end `explained: false` with the right residual feature first; a
 physics can be written as a custom effect, with that hypothesis offered (`--candidates`, from
 zero), where it must be named and the model end consistent, its size within 3 SE.
 
+Undetermined worlds (`--cases undetermined`, `--cases weak`): turn_dependent_wheelbase with each
+other catalogue effect and alone. Only the arcs determine its arc wheelbase (in `weak` the
+squares' rounded corners determine it too, weakly), so a fold that holds the arcs out leaves the
+model undetermined: a blind check of the held-out rule for such folds. Each world's report lists
+the folds that rule decided (`undetermined_folds`).
+
 Usage:
   diagnose_blind.py --odomcov BIN --seed S --worlds N --out DIR [--cases KIND] [--check]
                     [--report FILE.json]
