@@ -131,9 +131,11 @@ def test_calibrate_gives_calibrate_json():
     suite = odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "good_logs.yaml"))
     c = odomcov.calibrate(suite, rounds=2)
     for key in ("rounds", "named", "explained", "candidates_cv", "confounded", "next_experiments",
-                "model", "diff_drive"):
+                "model", "diff_drive", "stand_ins"):
         assert key in c, key
     assert c["explained"] == (c["after"]["verdict"] == "consistent")
+    if c["explained"]:
+        assert c["stand_ins"] == []  # looked for only when compare rejects the final model
     assert "domain:" in c["model"]["yaml"]
     assert c["diff_drive_yaml"].startswith("# diff_drive_controller parameters")
     held = odomcov.calibrate(suite, rounds=1, holdout=suite)

@@ -130,6 +130,7 @@ void write_verdict(std::ostream& out, const CalibrateResult& c, double alpha) {
   }
   out << "\nThe final model is still inconsistent with the training runs (compare at alpha = " << alpha
       << ", NEES mean " << fixed(c.after.nees_mean, 3) << " against 3): something the candidates do not cover is missing.\n";
+  for (const StandIn& s : c.stand_ins) out << "Stand-in: " << s.text << ".\n";
   std::size_t shown = 0;
   for (const ResidualAlignment& a : c.residuals) {
     if (!a.testable || shown == 3 || (shown > 0 && !(a.p_value < alpha))) break;

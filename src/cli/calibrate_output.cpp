@@ -231,6 +231,16 @@ json candidates_cv_json(const CalibrateResult& c) {
   return out;
 }
 
+json stand_ins_json(const std::vector<StandIn>& stand_ins) {
+  json out = json::array();
+  for (const StandIn& s : stand_ins) {
+    out.push_back({{"effect", s.effect}, {"parameter", s.parameter}, {"feature", s.feature},
+                   {"halves", s.halves}, {"values", s.value}, {"stderr", s.stderr_}, {"phi", s.phi},
+                   {"z", s.z}, {"p_value", s.p_value}, {"level", s.level}, {"text", s.text}});
+  }
+  return out;
+}
+
 json holdout_json(const HoldoutSummary& h) {
   json kinds = json::object();
   for (const auto& [kind, nees] : h.nees_by_kind) kinds[kind] = nees;
@@ -268,6 +278,7 @@ json calibrate_json(const Suite& suite, const SuiteModel& start, const Calibrate
   out.update(design_json(c.confounded, c.next_experiments));
   out["unresolved"] = c.unresolved;
   out["simplified"] = c.simplified;
+  out["stand_ins"] = stand_ins_json(c.stand_ins);
   out["joint_fit"] = c.joint.names.empty() ? json(nullptr) : fit_json(c.joint);
   if (!c.explained) out["residuals"] = residuals_json(c.residuals);
   if (c.holdout) {

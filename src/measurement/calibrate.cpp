@@ -6,6 +6,7 @@
 #include <map>
 
 #include "odomcov/base/format.hpp"
+#include "odomcov/measurement/cross_validation.hpp"
 #include "odomcov/measurement/domain.hpp"
 #include "odomcov/measurement/residual_features.hpp"
 
@@ -147,12 +148,161 @@ FitResult design_point(CalibrateResult& out) {
   return at;
 }
 
-/// The final model's account: compare, residuals, corrected odometry, what the runs cannot
-/// separate and what to record next.
-void account(const Suite& suite, const CalibrateOptions& options, ResidualCache& cache, CalibrateResult& out) {
+/// The stand-in check's fits of the final model on the halves of the training experiments.
+class StabilityCheck {
+ public:
+  StabilityCheck(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
+                 ResidualCache& cache, const CalibrateResult& out)
+      : suite_(suite), options_(options), progress_(progress), cache_(cache), model_(out.model),
+        names_(joint_parameters(out.model, named_noise_level(out.named))) {
+    for (const EffectSpec& e : model_.effects) {
+      const EffectInfo* info = info_of(e);
+      if (!info || !info->systematic || e.name == kGroupVariation || varied_by_group(model_, e.name)) continue;
+      for (const std::string& p : effect_candidate(*info).fitted) {
+        const auto at = std::find(names_.begin(), names_.end(), p);
+        if (at != names_.end()) tested_.emplace_back(e.name, static_cast<std::size_t>(at - names_.begin()));
+      }
+    }
+    for (const std::string& n : names_) systematic_ += n.rfind(std::string(kGroupVariation) + ".", 0) != 0;
+  }
+
+  bool empty() const { return tested_.empty(); }
+
+  /// Each tested parameter fitted on each half along `feature` (nothing when a half cannot be
+  /// fitted: too few runs for the model); `exact`: refitted exactly after the fast path.
+  std::vector<StandIn> test(const std::string& feature, const Folds& halves, bool exact) {
+    std::vector<StandIn> found;
+    if (progress_) {
+      if (progress_->cancel.load()) throw Cancelled();
+      progress_->fits_total += 2;
+    }
+    std::atomic<std::int64_t>* counter = progress_ ? &progress_->evaluations : nullptr;
+    FoldFits fits;
+    try {
+      fits = fit_folds(cache_, halves, model_, names_, {}, Likelihood::full, counter, options_.diagnose.path, exact);
+    } catch (const Cancelled&) {
+      throw;
+    } catch (const std::exception&) {
+      fits.models.clear();
+    }
+    if (progress_) progress_->fits_done += 2;
+    if (fits.models.size() != 2) return found;
+    // The dispersion of the means with each half under its own fit (the unrestricted model of
+    // a Chow test: a drift of the parameter does not inflate it), over 3 m - 2 p.
+    std::vector<std::vector<RunResidual>> own;
+    for (std::size_t h = 0; h < 2; ++h) {  // fold 1 - h is fitted on half h
+      ResidualCache half(cache_, halves.training(1 - h));
+      const std::vector<std::vector<RunResidual>>& r = half.at(fits.models[1 - h], counter);
+      own.insert(own.end(), r.begin(), r.end());
+    }
+    const double phi = mean_dispersion(own, 2 * systematic_).phi;
+    for (const auto& [effect, k] : tested_) {
+      StandIn s;
+      s.effect = effect, s.parameter = names_[k], s.feature = feature, s.phi = phi;
+      s.halves = {halves.names[0], halves.names[1]};
+      for (std::size_t h = 0; h < 2; ++h) {
+        SuiteModel m = fits.models[1 - h];
+        s.value[h] = fitted_parameter(m, names_[k]);
+        s.stderr_[h] = fits.stderrs[1 - h][k];
+      }
+      const double var = phi * (s.stderr_[0] * s.stderr_[0] + s.stderr_[1] * s.stderr_[1]);
+      if (!(std::isfinite(var) && var > 0) || !std::isfinite(s.value[0]) || !std::isfinite(s.value[1])) continue;
+      s.z = (s.value[0] - s.value[1]) / std::sqrt(var);
+      s.p_value = std::erfc(std::abs(s.z) / std::sqrt(2.0));
+      found.push_back(std::move(s));
+    }
+    return found;
+  }
+
+ private:
+  const Suite& suite_;
+  const CalibrateOptions& options_;
+  DiagnoseProgress* progress_;
+  ResidualCache& cache_;
+  const SuiteModel& model_;
+  std::vector<std::string> names_;
+  std::vector<std::pair<std::string, std::size_t>> tested_;  // (effect, index in names_)
+  std::size_t systematic_ = 0;
+};
+
+/// The finding in words.
+std::string stand_in_text(const StandIn& s, std::size_t tests) {
+  const auto number = [](double v, double se) { return format_number(v, "%.6g") + " +/- " + format_number(se, "%.2g"); };
+  return s.effect + " stands in for something that changes with " + s.feature + ": fitted on the experiments with " +
+         s.halves[0] + ", " + s.parameter + " = " + number(s.value[0], s.stderr_[0]) + "; on those with " + s.halves[1] +
+         ", " + number(s.value[1], s.stderr_[1]) + " (z = " + format_number(s.z, "%.3g") +
+         (s.phi > 1 ? ", the variances scaled by the halves' mean dispersion " + format_number(s.phi, "%.3g") : std::string()) +
+         ", p = " + format_number(s.p_value, "%.2g") + " against " + format_number(s.level, "%.2g") + " over the " +
+         std::to_string(tests) +
+         " pairs of a feature and a parameter tested). A cause would have one size on both sides: it is in the model "
+         "because it predicts the runs better, not as their cause; the physics that changes with " + s.feature +
+         " is not in the model";
+}
+
+/// The parameter stability check: a cause has one size wherever it acts. For each feature of
+/// the path (residual_feature_names; a feature that splits the experiments as an earlier one
+/// does is skipped) the training experiments are split at its median (feature_folds), and the
+/// final model is fitted on each half, every parameter refitted. The two halves' runs are
+/// independent, so under the model the difference of a parameter's two estimates is normal with
+/// the sum of their variances, each scaled by the mean dispersion phi of the two halves under
+/// their own fits when their means scatter more than predicted (the quasi-likelihood's
+/// [McCullagh89, §9.2], estimated under the alternative as a Chow test's variance is, so that
+/// the drift tested does not inflate it). A systematic effect whose parameter differs at the
+/// family-wise alpha (Bonferroni over every feature and parameter tested) stands in for
+/// something that changes with that feature [Chow60]. The fast path screens; a feature where
+/// it finds a difference is fitted again exactly (refit_exactly) before the decision. A half
+/// that leaves a parameter undetermined gives it no standard error and tests nothing.
+void find_stand_ins(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
+                    ResidualCache& cache, CalibrateResult& out) {
+  StabilityCheck check(suite, options, progress, cache, out);
+  if (check.empty()) return;
+  const bool screened = options.diagnose.path == FitPath::fast;
+  std::vector<std::pair<std::string, Folds>> features;
+  std::vector<std::vector<StandIn>> results;
+  std::size_t tests = 0;
+  for (const std::string& feature : residual_feature_names()) {
+    Folds halves = feature_folds(experiment_feature_values(suite, out.model.robot.wheelbase_m, feature), feature);
+    const auto same_halves = [&](const auto& f) { return f.second.of_experiment == halves.of_experiment; };
+    if (halves.size() < 2 || std::any_of(features.begin(), features.end(), same_halves)) continue;
+    results.push_back(check.test(feature, halves, !screened));
+    features.emplace_back(feature, std::move(halves));
+    tests += results.back().size();
+  }
+  if (tests == 0) return;
+  const double level = options.diagnose.alpha / static_cast<double>(tests);
+  const auto significant = [&](const StandIn& s) { return s.p_value < level; };
+  for (std::size_t f = 0; f < features.size(); ++f) {
+    if (screened && std::any_of(results[f].begin(), results[f].end(), significant)) {
+      results[f] = check.test(features[f].first, features[f].second, true);  // nothing when the exact fit fails
+    }
+  }
+  for (std::vector<StandIn>& feature : results) {
+    for (StandIn& s : feature) {
+      if (!significant(s)) continue;
+      s.level = level;
+      s.text = stand_in_text(s, tests);
+      const auto same = std::find_if(out.stand_ins.begin(), out.stand_ins.end(),
+                                     [&](const StandIn& x) { return x.effect == s.effect; });
+      if (same == out.stand_ins.end()) {
+        out.stand_ins.push_back(std::move(s));
+      } else if (s.p_value < same->p_value) {
+        *same = std::move(s);
+      }
+    }
+  }
+}
+
+/// The final model's account: compare, the stand-in check when compare rejects it, residuals, corrected odometry, what
+/// the runs cannot separate and what to record next.
+void account(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress, ResidualCache& cache,
+             CalibrateResult& out) {
   const Comparison& c = cache.comparison(out.model, options.diagnose.alpha, options.diagnose.calibration);
   out.after = summarise(c);
   out.explained = c.verdict.consistent();
+  // Gatekeeping: a model that compare finds consistent is not searched for stand-ins, so the
+  // claims that the runs are not explained (compare's, then the stand-ins') are made at alpha
+  // together when the model is right.
+  if (!out.explained) find_stand_ins(suite, options, progress, cache, out);
   if (!out.explained) out.residuals = residual_alignment(cache, out.model);
   out.odometry_correction = odometry_correction(suite, out.model);
   FitResult at = design_point(out);
@@ -254,7 +404,7 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
   if (progress && progress->cancel.load()) throw Cancelled();
   simplify_nested(suite, options, progress, cache, out);
   joint_fit(suite, options, progress, cache, out);
-  account(suite, options, cache, out);
+  account(suite, options, progress, cache, out);
   out.model.domain = training_domain(suite, out.model.robot.wheelbase_m);
   out.diff_drive = diff_drive_parameters(suite, out.model);
   if (holdout) {

@@ -104,7 +104,7 @@ double log_likelihood_of(const std::vector<std::vector<RunResidual>>& residuals,
 
 FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& start,
                    const std::vector<std::string>& names, const std::vector<std::string>& own,
-                   Likelihood kind, std::atomic<std::int64_t>* evaluations, FitPath path) {
+                   Likelihood kind, std::atomic<std::int64_t>* evaluations, FitPath path, bool refit) {
   FoldFits out;
   for (std::size_t f = 0; f < folds.size(); ++f) {
     if (names.empty()) {
@@ -116,7 +116,7 @@ FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& s
     const FitResult first = fit(cache.suite(), start, names, kind, evaluations, path, &view);
     // The exact refit moves the candidate's own parameters; the base (no own ones) its whole
     // fit, so that neither side of a held-out comparison rests on the fast path alone.
-    const FitResult r = refit_exactly(first, own.empty() ? names : own, kind, evaluations, view);
+    const FitResult r = refit ? refit_exactly(first, own.empty() ? names : own, kind, evaluations, view) : first;
     out.models.push_back(r.model);
     out.stderrs.push_back(stderrs_of(r, names));
   }

@@ -237,39 +237,6 @@ std::vector<CandidateType> round_candidates(const Suite& suite, const EffectList
   return types;
 }
 
-/// How far the experiments' mean errors scatter beyond what the model predicts for them.
-struct MeanDispersion {
-  double phi = 1.0;  // at least 1
-  int dof = 0;       // 3 m - p; 0: none estimated
-};
-
-/// The Pearson statistic of the experiments' mean residuals over its degrees of freedom:
-/// phi = sum_e r_e' C_e^-1 r_e / (3 m - p), r_e the mean of experiment e's residuals and C_e
-/// = sum_i Sigma_i / n^2 its predicted covariance, each run conditioned on the earlier runs of
-/// its group (condition_on_groups: independent under the model), over the m experiments and
-/// the p systematic parameters fitted; 1 when smaller, or without degrees of freedom. A
-/// systematic misfit the model does not have scatters the experiments' means as a variance
-/// would, so phi is the overdispersion of the quasi-likelihood [McCullagh89, §9.2]: under it a
-/// likelihood-ratio gain in the mean is phi times too large.
-MeanDispersion mean_dispersion(const std::vector<std::vector<RunResidual>>& residuals, std::size_t fitted) {
-  double pearson = 0.0;
-  int terms = 0;
-  for (const std::vector<RunResidual>& runs : condition_on_groups(residuals)) {
-    if (runs.empty()) continue;
-    const double n = static_cast<double>(runs.size());
-    Vector3 r = Vector3::Zero();
-    Matrix3 C = Matrix3::Zero();
-    for (const RunResidual& x : runs) r += (x.error - x.mean) / n, C += x.cov / (n * n);
-    const Eigen::LDLT<Matrix3> ldlt(C);
-    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0) || !r.allFinite()) continue;
-    pearson += r.dot(ldlt.solve(r));
-    terms += 3;
-  }
-  const int dof = terms - static_cast<int>(fitted);
-  if (dof <= 0) return {};
-  return {std::max(1.0, pearson / dof), dof};
-}
-
 /// How far each experiment's runs scatter about their own mean beyond what the model predicts
 /// for them: phi_e, the Pearson statistic of its runs about their own mean over its expectation
 /// (scatter_ratio; 3 (n - 1) for runs that share one covariance), each run conditioned on the

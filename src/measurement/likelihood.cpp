@@ -289,4 +289,23 @@ std::optional<double> scatter_ratio(const std::vector<Vector3>& r, const std::ve
   return w / expected;
 }
 
+MeanDispersion mean_dispersion(const std::vector<std::vector<RunResidual>>& residuals, std::size_t fitted) {
+  double pearson = 0.0;
+  int terms = 0;
+  for (const std::vector<RunResidual>& runs : condition_on_groups(residuals)) {
+    if (runs.empty()) continue;
+    const double n = static_cast<double>(runs.size());
+    Vector3 r = Vector3::Zero();
+    Matrix3 C = Matrix3::Zero();
+    for (const RunResidual& x : runs) r += (x.error - x.mean) / n, C += x.cov / (n * n);
+    const Eigen::LDLT<Matrix3> ldlt(C);
+    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0) || !r.allFinite()) continue;
+    pearson += r.dot(ldlt.solve(r));
+    terms += 3;
+  }
+  const int dof = terms - static_cast<int>(fitted);
+  if (dof <= 0) return {};
+  return {std::max(1.0, pearson / dof), dof};
+}
+
 }  // namespace odomcov

@@ -4,6 +4,7 @@
 // training domain, and (with held-out runs) judge the model on runs it never saw.
 #pragma once
 
+#include <array>
 #include <optional>
 #include <string>
 #include <utility>
@@ -67,6 +68,24 @@ inline constexpr double kUnusedVariance = 1e6;
 /// diff_drive_controller's parameters from a calibrated model and its training runs.
 DiffDriveParameters diff_drive_parameters(const Suite& suite, const SuiteModel& model);
 
+/// An adopted systematic effect whose size is not the same on the two halves of the training
+/// experiments along a feature of the path (stand_ins): it predicts the runs better, so it
+/// stays in the model, but a cause would have one size on both sides; it stands in for physics
+/// that changes with the feature (a scale error for a scale that fades as the tyres warm).
+struct StandIn {
+  std::string effect;
+  std::string parameter;  // its fit name, e.g. "scale_error.Es"
+  std::string feature;    // a residual feature (residual_feature_names)
+  std::array<std::string, 2> halves;  // the halves' names (feature_folds), low side first
+  std::array<double, 2> value{};      // the parameter fitted on each half (every other parameter refitted too)
+  std::array<double, 2> stderr_{};    // their standard errors
+  double phi = 1.0;  // the mean dispersion of the halves under their own fits, which scales the variances
+  double z = 0.0;    // (value[0] - value[1]) / sqrt(phi (stderr_[0]^2 + stderr_[1]^2))
+  double p_value = 1.0;  // two-sided
+  double level = 0.0;    // the family-wise alpha over every (feature, parameter) pair tested
+  std::string text;      // the finding in words
+};
+
 struct CalibrateResult {
   std::vector<Diagnosis> rounds;
   /// The adopted candidates, in order; an effect the final nested check replaced by a simpler
@@ -85,6 +104,9 @@ struct CalibrateResult {
   SuiteModel model;
   ModelSummary after;  // the final model against the training runs
   bool explained = false;  // compare finds the final model consistent with the training runs
+  /// When the final model is not explained: its systematic effects whose size changes along a
+  /// feature (StandIn), at most one per effect (its most significant).
+  std::vector<StandIn> stand_ins;
   std::vector<ResidualAlignment> residuals;  // when not explained
   std::optional<OdometryCorrection> odometry_correction;
   /// Effects the last round stopped as confounded with the model's: not adopted, not ruled

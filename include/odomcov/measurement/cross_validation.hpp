@@ -65,11 +65,12 @@ struct FoldFits {
 /// parameters of a candidate, or over every name when `own` is empty: the base). No names:
 /// `start` for every fold. `cache` belongs to the whole
 /// suite, so each fold's model is propagated once for all its runs, the held-out ones
-/// included. `path`: exact fits each fold on the exact path (diagnose --exact).
+/// included. `path`: exact fits each fold on the exact path (diagnose --exact). `refit`
+/// false: no exact refit after a fast fit (a screen, whose findings are then refitted).
 FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& start,
                    const std::vector<std::string>& names, const std::vector<std::string>& own,
                    Likelihood kind, std::atomic<std::int64_t>* evaluations = nullptr,
-                   FitPath path = FitPath::fast);
+                   FitPath path = FitPath::fast, bool refit = true);
 
 /// The held-out log-likelihood of the runs outside `training` (one flag per experiment) given
 /// the runs inside it: log L(all) - log L(training). For independent runs it is the held-out

@@ -111,4 +111,21 @@ double scatter_log_likelihood(const std::vector<std::vector<RunResidual>>& resid
 /// that is not positive definite or a residual that is not finite.
 std::optional<double> scatter_ratio(const std::vector<Vector3>& r, const std::vector<Matrix3>& cov);
 
+/// How far the experiments' mean errors scatter beyond what the model predicts for them
+/// (mean_dispersion).
+struct MeanDispersion {
+  double phi = 1.0;  // at least 1
+  int dof = 0;       // 3 m - p; 0: none estimated
+};
+
+/// The Pearson statistic of the experiments' mean residuals over its degrees of freedom:
+/// phi = sum_e r_e' C_e^-1 r_e / (3 m - p), r_e the mean of experiment e's residuals and C_e
+/// = sum_i Sigma_i / n^2 its predicted covariance, each run conditioned on the earlier runs of
+/// its group (condition_on_groups: independent under the model), over the m experiments and
+/// the p systematic parameters fitted; 1 when smaller, or without degrees of freedom. A
+/// systematic misfit the model does not have scatters the experiments' means as a variance
+/// would, so phi is the overdispersion of the quasi-likelihood [McCullagh89, §9.2]: under it a
+/// likelihood-ratio gain in the mean is phi times too large.
+MeanDispersion mean_dispersion(const std::vector<std::vector<RunResidual>>& residuals, std::size_t fitted);
+
 }  // namespace odomcov
