@@ -55,7 +55,14 @@
 # the arcs alone), run once with the method unchanged; and a sixth, weak 22012028 (the same with
 # the squares' corners turned on arcs, so that the squares determine the arc wheelbase weakly, as
 # OptiOdom's do), run once, with the rule and (for the comparison in results/diagnose/README.md)
-# without it.
+# without it. calibrate's stand-in check (an adopted effect whose size differs between the halves
+# of the experiments along a feature is reported as a stand-in, not named as a cause) came from
+# the warm-up worlds of the open batch 19012028 and was checked on the mixed batch 16012028,
+# which it changed in no world. Run on new seeds (mixed 24012028, none 25012028, group 26012028,
+# part of open 23012028), it called a right model's effect a stand-in in one mixed world, so the
+# check now runs only when compare rejects the final model (results/diagnose/README.md); then
+# every batch was rerun with new seeds: mixed 30012028, none 31012028, group 1022028, open
+# 29012028, undetermined 2022028, weak 3022028.
 #   scripts/diagnose_rates.sh            # the six batches
 #   scripts/diagnose_rates.sh mixed      # one: mixed, none, group, open, undetermined, weak, or pilot (16 worlds)
 set -euo pipefail
@@ -74,11 +81,11 @@ run() {  # name seed worlds cases
     --seed "$2" --worlds "$3" --cases "$4" --out "$work/$1" --report "$out/$1.json" > "$out/$1.txt"
   echo "runtime: $((SECONDS - start)) s for $3 worlds on $(nproc) cores" >> "$out/$1.txt"
 }
-if want mixed; then run mixed 16012028 112 mixed; fi
-if want none; then run none 17012028 200 none; fi
-if want group; then run group 18012028 60 group; fi
-if want open; then run open 19012028 40 open; fi
-if want undetermined; then run undetermined 21012028 72 undetermined; fi
-if want weak; then run weak 22012028 72 weak; fi
+if want mixed; then run mixed 30012028 112 mixed; fi
+if want none; then run none 31012028 200 none; fi
+if want group; then run group 1022028 60 group; fi
+if want open; then run open 29012028 40 open; fi
+if want undetermined; then run undetermined 2022028 72 undetermined; fi
+if want weak; then run weak 3022028 72 weak; fi
 if want pilot; then run pilot 20261125 16 mixed; fi
 echo "rates in $out/" >&2
