@@ -403,6 +403,13 @@ def calibrate(odomcov, suite, out, candidates=None):
         return json.load(f)
 
 
+def causes(report):
+    """(the adopted effects named as causes, those calibrate reports as stand-ins): a stand-in's
+    size changes along a feature of the path; it is in the model, but not named as a cause."""
+    stand_ins = sorted({s["effect"] for s in report.get("stand_ins") or []})
+    return [n for n in report["named"] if n not in stand_ins], stand_ins
+
+
 def _checks(name, truth, fit, model):
     """(label, truth, fitted, SE) for each hidden parameter of a named effect."""
     if name == NOISE_LEVEL:
@@ -453,8 +460,7 @@ def custom_check(odomcov, directory, lab, name, truth):
     report = calibrate(odomcov, lab, os.path.join(directory, "custom"), candidates)
     fit = report.get("joint_fit") or {"parameters": {}, "stderr": {}}
     got, se = fit["parameters"].get(f"{name}.a"), fit["stderr"].get(f"{name}.a")
-    stand_ins = {x["effect"] for x in report.get("stand_ins") or []}
-    return {"named": [n for n in report["named"] if n not in stand_ins], "a": got, "stderr": se, "truth": truth[name]["a"],
+    return {"named": causes(report)[0], "a": got, "stderr": se, "truth": truth[name]["a"],
             "within_3se": got is not None and se is not None and abs(got - truth[name]["a"]) <= 3 * se,
             "consistent": report["after"]["verdict"] == "consistent",
             "nees_mean": report["after"]["nees_mean"]}
@@ -506,10 +512,7 @@ def evaluate(odomcov, directory, index, rng, hidden, grouped=False, rounded=Fals
     text, truth = world_yaml(rng, index, hidden, grouped, rounded)
     lab = make_lab(odomcov, directory, text, truth)
     report = calibrate(odomcov, lab, os.path.join(directory, "cal"))
-    # An adopted effect that calibrate reports as a stand-in (its size changes along a feature
-    # of the path) is in the model, but not named as a cause.
-    stand_ins = sorted({s["effect"] for s in report.get("stand_ins") or []})
-    named = [n for n in report["named"] if n not in stand_ins]
+    named, stand_ins = causes(report)
     residuals = [(r["feature"], r["p_value"]) for r in report.get("residuals") or []
                  if r.get("p_value") is not None]
     result = {"world": index, "hidden": sorted(hidden), "named": named, "stand_ins": stand_ins,

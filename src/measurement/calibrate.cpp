@@ -151,9 +151,9 @@ FitResult design_point(CalibrateResult& out) {
 /// The stand-in check's fits of the final model on the halves of the training experiments.
 class StabilityCheck {
  public:
-  StabilityCheck(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
-                 ResidualCache& cache, const CalibrateResult& out)
-      : suite_(suite), options_(options), progress_(progress), cache_(cache), model_(out.model),
+  StabilityCheck(const CalibrateOptions& options, DiagnoseProgress* progress, ResidualCache& cache,
+                 const CalibrateResult& out)
+      : options_(options), progress_(progress), cache_(cache), model_(out.model),
         names_(joint_parameters(out.model, named_noise_level(out.named))) {
     for (const EffectSpec& e : model_.effects) {
       const EffectInfo* info = info_of(e);
@@ -215,7 +215,6 @@ class StabilityCheck {
   }
 
  private:
-  const Suite& suite_;
   const CalibrateOptions& options_;
   DiagnoseProgress* progress_;
   ResidualCache& cache_;
@@ -254,7 +253,7 @@ std::string stand_in_text(const StandIn& s, std::size_t tests) {
 /// that leaves a parameter undetermined gives it no standard error and tests nothing.
 void find_stand_ins(const Suite& suite, const CalibrateOptions& options, DiagnoseProgress* progress,
                     ResidualCache& cache, CalibrateResult& out) {
-  StabilityCheck check(suite, options, progress, cache, out);
+  StabilityCheck check(options, progress, cache, out);
   if (check.empty()) return;
   const bool screened = options.diagnose.path == FitPath::fast;
   std::vector<std::pair<std::string, Folds>> features;
