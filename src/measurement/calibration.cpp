@@ -563,22 +563,29 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
   return out;
 }
 
+/// What a key tells apart: every number of the model (its residuals), or only those that move a
+/// run's prediction (residuals' `predictions`: the measurement noise and the grouped effects,
+/// group_variation, enter after it).
+enum class KeyOf { residuals, predictions };
+
 /// The cache key of a model: its numbers, bit for bit, with inert catalogue effects (all values
 /// neutral) left out. A custom effect is never left out: its "neutral" values are the start
 /// its author gave (EffectInfo of a custom effect), which need not do nothing.
-std::string model_key(const SuiteModel& m) {
+std::string model_key(const SuiteModel& m, KeyOf of = KeyOf::residuals) {
   std::string key;
   auto put = [&key](double x) { key.append(reinterpret_cast<const char*>(&x), sizeof x); };
   Robot robot = m.robot;  // every robot parameter, bit for bit
   for (const RobotParameter& p : robot_parameters()) put(p.ref(robot));
-  put(m.measurement_noise.xy_m);
-  put(m.measurement_noise.theta_rad);
+  if (of == KeyOf::residuals) {
+    put(m.measurement_noise.xy_m);
+    put(m.measurement_noise.theta_rad);
+  }
   put(m.order);
   for (const EffectSpec& e : m.effects) {
     const EffectInfo* info = info_of(e);
     bool inert = info && !e.custom && info->parameters.size() == e.values.size();
     for (std::size_t i = 0; inert && i < e.values.size(); ++i) inert = e.values[i] == info->parameters[i].neutral;
-    if (inert) continue;
+    if (inert || (of == KeyOf::predictions && info && info->grouped)) continue;
     key += e.name;
     key += '\0';
     key += e.target;  // group_variation's varied parameter
@@ -604,7 +611,7 @@ struct ResidualCache::Store {
   };
   /// The entry of `key` in `map`, computed by `make` when absent; marked as used now.
   template <class T, class Make>
-  const T& get(std::map<std::string, Entry<T>>& map, const std::string& key, Make make) {
+  T& get(std::map<std::string, Entry<T>>& map, const std::string& key, Make make) {
     auto it = map.find(key);
     if (it == map.end()) it = map.emplace(key, Entry<T>{make(), generation}).first;
     it->second.used = generation;
@@ -637,7 +644,8 @@ struct ResidualCache::Store {
     if (any) {
       if (counter) ++*counter;
       ++computed;
-      Residuals fresh = residuals(*suite, model, &coarse, &missing);
+      RunPredictions& kept = get(predictions, model_key(model, KeyOf::predictions), [] { return RunPredictions(); });
+      Residuals fresh = residuals(*suite, model, &coarse, &missing, &kept);
       for (std::size_t e = 0; e < n; ++e) {
         if (!missing[e]) continue;
         p.value[e] = std::move(fresh[e]);
@@ -649,13 +657,16 @@ struct ResidualCache::Store {
   const Suite* suite;
   CoarseRuns coarse;  // the logged runs' coarse pieces, made once for every model
   std::map<std::string, Entry<Partial>> by_model;
+  /// Each run's prediction, by model_key(KeyOf::predictions): models that differ only in a
+  /// group's sd or the measurement noise share them.
+  std::map<std::string, Entry<RunPredictions>> predictions;
   std::map<std::string, Entry<Comparison>> comparisons;  // by model, alpha and the referee's options
   std::int64_t computed = 0;
   std::int64_t generation = 0;
 };
 
 ResidualCache::ResidualCache(const Suite& suite)
-    : store_(std::make_shared<Store>(Store{&suite, coarsen_logged_runs(suite), {}, {}, 0, 0})) {}
+    : store_(std::make_shared<Store>(Store{&suite, coarsen_logged_runs(suite), {}, {}, {}, 0, 0})) {}
 
 void ResidualCache::age() {
   auto drop_unused = [this](auto& map) {
@@ -664,6 +675,7 @@ void ResidualCache::age() {
     }
   };
   drop_unused(store_->by_model);
+  drop_unused(store_->predictions);
   drop_unused(store_->comparisons);
   ++store_->generation;
 }

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -60,16 +61,26 @@ GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<
           sd2_h2 * curvature / std::sqrt(2.0)};
 }
 
+/// The prediction in `kept` when it holds one, else predict()'s, stored there when given.
+template <class Predict>
+Prediction kept_or_predicted(std::optional<Prediction>* kept, Predict&& predict) {
+  if (kept == nullptr) return predict();
+  if (!kept->has_value()) kept->emplace(predict());
+  return **kept;
+}
+
 /// One planned path's prediction for a run that starts at `heading0_rad`, with its group terms:
 /// the residual of each run of `runs` (all of the experiment's, or one).
+/// `kept` (when not nullptr) is the prediction's slot (residuals' `predictions`).
 void predict_path_runs(const SuiteExperiment& ex, const SuiteModel& model, const GroupTarget& target,
                        const Matrix3& meas, int group, double heading0_rad, std::size_t first,
-                       std::size_t count, std::vector<RunResidual>& out) {
+                       std::size_t count, std::vector<RunResidual>& out, std::optional<Prediction>* kept) {
   const double B = model.robot.wheelbase_m;
   std::vector<double> durations;
   const std::vector<ArcSegment> pieces = path_model_pieces(ex.path, B, model.effects, &durations);
-  const Prediction p =
-      predict_with_order(pieces, durations, model.robot, model.effects, model.order, heading0_rad);
+  const Prediction p = kept_or_predicted(kept, [&] {
+    return predict_with_order(pieces, durations, model.robot, model.effects, model.order, heading0_rad);
+  });
   const GroupTerms g = group_terms(
       pieces, durations, model.robot, model.effects, target,
       target.present ? predict_mean(pieces, durations, model.robot, model.effects, nullptr, heading0_rad)
@@ -80,6 +91,26 @@ void predict_path_runs(const SuiteExperiment& ex, const SuiteModel& model, const
     out[i] = {pose_error(ex.runs[i].measured, odometry), p.mean + p.noise_mean + g.shift, p.cov + meas,
               g.column, group, g.column2, p.noise_mean};
   }
+}
+
+/// One slot per run of every experiment (residuals' `predictions`); what they hold stays.
+void size_slots(RunPredictions& slots, const Suite& suite) {
+  slots.resize(suite.experiments.size());
+  for (std::size_t e = 0; e < slots.size(); ++e) slots[e].resize(suite.experiments[e].runs.size());
+}
+
+/// A logged run's residual (its prediction kept in `kept` when not nullptr).
+void predict_logged_run(const SuiteRun& run, const SuiteModel& model, const GroupTarget& target,
+                        const Matrix3& meas, int group, const CoarsePieces* coarse,
+                        std::optional<Prediction>* kept, RunResidual& out) {
+  const Prediction p = kept_or_predicted(kept, [&] {
+    return predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order,
+                              run.heading0_rad, coarse);
+  });
+  const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects, target, p.mean,
+                                   &p.odometry_end_pose, run.heading0_rad);
+  out = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift, p.cov + meas,
+         g.column, group, g.column2, p.noise_mean};
 }
 
 }  // namespace
@@ -124,7 +155,8 @@ CoarseRuns coarsen_logged_runs(const Suite& suite) {
 }
 
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model,
-                                                const CoarseRuns* coarse, const std::vector<bool>* only) {
+                                                const CoarseRuns* coarse, const std::vector<bool>* only,
+                                                RunPredictions* predictions) {
   const Matrix3 meas = model.measurement_noise.covariance();
   const GroupTarget target = group_target(model.effects);
   // With an effect that uses the absolute heading every run is predicted from its own start
@@ -140,6 +172,7 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
   // the thread schedule.
   std::vector<std::pair<std::size_t, std::size_t>> work;
   std::vector<int> group_of(suite.experiments.size());
+  if (predictions != nullptr) size_slots(*predictions, suite);  // serially: the parallel loop fills its own slots
   for (std::size_t e = 0; e < suite.experiments.size(); ++e) {
     const SuiteExperiment& ex = suite.experiments[e];
     group_of[e] = groups.emplace(group_key(ex), static_cast<int>(groups.size())).first->second;
@@ -159,22 +192,18 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
   };
   std::stable_sort(work.begin(), work.end(), [&](const auto& a, const auto& b) { return length(a) > length(b); });
   tbb::parallel_for(std::size_t{0}, work.size(), [&](std::size_t w) {
-    const auto [e, r] = work[w];
+    const std::size_t e = work[w].first, r = work[w].second;
     const SuiteExperiment& ex = suite.experiments[e];
     const int group = group_of[e];
+    std::optional<Prediction>* kept = predictions != nullptr ? &(*predictions)[e][r] : nullptr;
     if (!ex.logged) {
       const std::size_t count = per_run ? 1 : ex.runs.size();
-      predict_path_runs(ex, model, target, meas, group, per_run ? ex.runs[r].heading0_rad : 0.0, r, count, out[e]);
+      predict_path_runs(ex, model, target, meas, group, per_run ? ex.runs[r].heading0_rad : 0.0, r, count, out[e],
+                        kept);
       return;
     }
-    const SuiteRun& run = ex.runs[r];
-    const Prediction p = predict_with_order(run.pieces, run.durations_s, model.robot, model.effects,
-                                            model.order, run.heading0_rad,
-                                            coarse != nullptr ? &(*coarse)[e][r] : nullptr);
-    const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects, target,
-                                     p.mean, &p.odometry_end_pose, run.heading0_rad);
-    out[e][r] = {pose_error(run.measured, p.odometry_end_pose), p.mean + p.noise_mean + g.shift,
-                 p.cov + meas, g.column, group, g.column2, p.noise_mean};
+    predict_logged_run(ex.runs[r], model, target, meas, group, coarse != nullptr ? &(*coarse)[e][r] : nullptr, kept,
+                       out[e][r]);
   }, tbb::simple_partitioner());
   return out;
 }

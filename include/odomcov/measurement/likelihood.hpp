@@ -49,10 +49,20 @@ struct RunResidual {
 /// experiments to compute (one flag per experiment); the others are left with no runs. A run's
 /// residual does not depend on the others', and group indices count every experiment, so the
 /// marked ones get the same numbers as without.
+///
+/// `predictions`, when given, keeps each run's prediction (predict_with_order, before the group
+/// terms and the measurement noise are added) from one call to the next: a run whose slot holds
+/// one reuses it, and a run predicted here fills its slot (a planned path's runs that share one
+/// prediction keep it in their first run's slot). The slots must come from models that predict
+/// the same: the same robot, order and effects, with at most group_variation's values and the
+/// measurement noise changed (neither moves a prediction: they enter after it). A fit of a group's
+/// sd then propagates no run again.
 using CoarseRuns = std::vector<std::vector<CoarsePieces>>;
+using RunPredictions = std::vector<std::vector<std::optional<Prediction>>>;
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model,
                                                 const CoarseRuns* coarse = nullptr,
-                                                const std::vector<bool>* only = nullptr);
+                                                const std::vector<bool>* only = nullptr,
+                                                RunPredictions* predictions = nullptr);
 
 /// Every logged run's pieces coarsened at the suite's wheelbase (coarsen: what the order-2
 /// correction is taken on), indexed as the suite's experiments and runs; planned-path
