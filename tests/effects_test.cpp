@@ -88,6 +88,33 @@ TEST(Effects, CatalogueMatchesSpec) {
             "- wheel_diameter_ratio: {Ed: 1.0041}");
 }
 
+TEST(Effects, MeasurementOnlyIsWhatMeasuresAndNothingElse) {
+  // EffectInfo::measurement_only lets predict_parts leave an effect out of the motion and
+  // calibrate's cache share predictions across its values: true exactly for the effects whose
+  // instance has a measurement hook, and those have no hook on the motion (a piece's terms,
+  // cuts or per-run constants).
+  for (const effects::EffectType& type : effects::registry()) {
+    std::vector<double> typical;
+    for (const EffectParameterInfo& p : type.info.parameters) typical.push_back(p.typical);
+    const std::unique_ptr<effects::Effect> e = type.make(typical);
+    EXPECT_EQ(e->measures(), type.info.measurement_only) << type.info.name;
+    if (!type.info.measurement_only) continue;
+    EXPECT_EQ(e->dependence(), effects::Dependence::none) << type.info.name;
+    EXPECT_FALSE(e->refines()) << type.info.name;
+    EXPECT_EQ(e->run_constants(), 0) << type.info.name;
+    effects::Motion motion;
+    motion.dL_m = 0.01;
+    motion.dR_m = 0.012;
+    effects::Systematic sys;
+    e->systematic(motion, sys);
+    EXPECT_EQ(sys.scale_left, 1.0);
+    EXPECT_EQ(sys.scale_right, 1.0);
+    EXPECT_EQ(sys.wheelbase_factor, 1.0);
+    EXPECT_EQ(sys.lateral, 0.0);
+    EXPECT_EQ(sys.noise_factor, 1.0);
+  }
+}
+
 TEST(Engine, NoEffectsReproducesTheClosedForm) {
   std::mt19937_64 rng(55);
   for (int trial = 0; trial < 30; ++trial) {

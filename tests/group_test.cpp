@@ -316,6 +316,45 @@ TEST(GroupLikelihood, LoggedRunsTheSameWhateverTheThreads) {
   EXPECT_EQ(res[0][0].group, res[0][1].group);
 }
 
+TEST(GroupLikelihood, KeptPredictionsGiveTheSameBits) {
+  // residuals' `predictions` (what calibrate's cache shares between models that differ only in
+  // a reference offset, a group's sd or the measurement noise): a model predicted from another
+  // model's kept predictions gets the bits of its own propagation. A group that varies the
+  // reference offset itself, which the kept predictions leave out, too.
+  Suite suite = load_suite(ODOMCOV_SOURCE_DIR "/tests/data/suites/good_logs.yaml");
+  suite.experiments[0].group = "day-1";
+  for (int order : {1, 2}) {  // order 2: the logged runs' coarse correction, kept in parts
+    SuiteModel a = suite_model(suite);
+    a.order = order;
+    a.effects = {{"wheelbase_error", {1.01}},
+                 {"reference_offset", {0.01, -0.02}},
+                 {kGroupVariation, {0.003}, "reference_offset.dx"}};
+    SuiteModel b = a;
+    b.effects[1].values = {0.013, -0.015};
+    b.effects[2].values = {0.002};
+    b.measurement_noise.xy_m *= 2.0;
+    RunPredictions kept;
+    residuals(suite, a, nullptr, nullptr, &kept);
+    ASSERT_TRUE(kept[0][0].has_value());
+    const auto from_kept = residuals(suite, b, nullptr, nullptr, &kept);
+    const auto fresh = residuals(suite, b);
+    ASSERT_EQ(from_kept.size(), fresh.size());
+    for (std::size_t e = 0; e < fresh.size(); ++e) {
+      ASSERT_EQ(from_kept[e].size(), fresh[e].size());
+      for (std::size_t r = 0; r < fresh[e].size(); ++r) {
+        EXPECT_EQ(from_kept[e][r].error, fresh[e][r].error);
+        EXPECT_EQ(from_kept[e][r].mean, fresh[e][r].mean);
+        EXPECT_EQ(from_kept[e][r].cov, fresh[e][r].cov);
+        EXPECT_EQ(from_kept[e][r].group_column, fresh[e][r].group_column);
+        EXPECT_EQ(from_kept[e][r].group_column2, fresh[e][r].group_column2);
+      }
+    }
+    // and the offset still acts: b's means are not a's
+    EXPECT_NE(fresh[0][0].mean, residuals(suite, a)[0][0].mean);
+    EXPECT_GT(fresh[0][0].group_column.norm(), 0.0);
+  }
+}
+
 TEST(GroupSuite, BadTargetsAreBadInput) {
   const auto dir = std::filesystem::temp_directory_path() / "odomcov_group_bad";
   std::filesystem::create_directories(dir);

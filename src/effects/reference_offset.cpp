@@ -37,7 +37,7 @@ class ReferenceOffset final : public Effect {
 }  // namespace
 
 EffectType reference_offset_type() {
-  return {{"reference_offset",
+  EffectType type{{"reference_offset",
            {{"dx", "m", -1e300, 1e300, false, false, 0.0, 0.01},
             {"dy", "m", -1e300, 1e300, false, false, 0.0, 0.01}},
            "the external reference tracks a point off the wheel-axle centre",
@@ -48,6 +48,8 @@ EffectType reference_offset_type() {
           [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
             return std::make_unique<ReferenceOffset>(v[0], v[1]);
           }};
+  type.info.measurement_only = true;
+  return type;
 }
 
 }  // namespace odomcov::effects

@@ -602,13 +602,24 @@ CoarsePieces coarsen(const std::vector<ArcSegment>& pieces, const std::vector<do
   return out;
 }
 
-Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
-                              const std::vector<double>& durations_s, const Robot& robot,
-                              const EffectList& effects, int order, double heading0_rad,
+PredictionParts predict_parts(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                              const Robot& robot, const EffectList& effects, int order, double heading0_rad,
                               const CoarsePieces* coarse) {
+  // Without the measurement-only effects the engines' hooks do nothing: each part's mean is
+  // pose_error(true_end_pose, odometry_end_pose) and its cov the true pose's. The grouped ones
+  // (group_variation) have no hooks in one run's prediction, and go too: one may vary a
+  // measurement-only effect's parameter.
+  EffectList moving;
+  for (const EffectSpec& e : effects) {
+    const EffectInfo* info = info_of(e);
+    if (!(info && (info->measurement_only || info->grouped))) moving.push_back(e);
+  }
   const bool given_usable = coarse != nullptr && coarse->wheelbase_m == robot.wheelbase_m;
+  PredictionParts out;
   if (order == 1) {
-    return predict(pieces, durations_s, robot, effects, heading0_rad, given_usable ? &coarse->odometry_end_pose : nullptr);
+    out.whole = predict(pieces, durations_s, robot, moving, heading0_rad,
+                        given_usable ? &coarse->odometry_end_pose : nullptr);
+    return out;
   }
   CoarsePieces here;
   if (!given_usable) {
@@ -616,18 +627,47 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
     coarse = &here;
   }
   if (coarse->pieces.size() == pieces.size()) {
-    return predict_second_order(pieces, durations_s, robot, effects, heading0_rad);
+    out.whole = predict_second_order(pieces, durations_s, robot, moving, heading0_rad);
+    return out;
   }
   // Fine pieces (a logged run): the first order on them, with every piece's duration, and only
   // the order-2 correction (second minus first order) on the coarsened pieces, timed when the
   // pieces are (an effect may depend on the speed).
-  Prediction out = predict(pieces, durations_s, robot, effects, heading0_rad, &coarse->odometry_end_pose);
-  const Prediction coarse2 =
-      predict_second_order(coarse->pieces, coarse->durations_s, robot, effects, heading0_rad);
-  const Prediction coarse1 = predict(coarse->pieces, coarse->durations_s, robot, effects, heading0_rad);
-  out.noise_mean += coarse2.mean + coarse2.noise_mean - coarse1.mean - coarse1.noise_mean;
-  out.cov += coarse2.cov - coarse1.cov;
+  out.whole = predict(pieces, durations_s, robot, moving, heading0_rad, &coarse->odometry_end_pose);
+  out.corrected = true;
+  out.coarse2 = predict_second_order(coarse->pieces, coarse->durations_s, robot, moving, heading0_rad);
+  out.coarse1 = predict(coarse->pieces, coarse->durations_s, robot, moving, heading0_rad);
   return out;
+}
+
+Prediction measured(const PredictionParts& parts, const Robot& robot, const EffectList& effects) {
+  EffectList hooks;
+  for (const EffectSpec& e : effects) {
+    const EffectInfo* info = info_of(e);
+    if (info && info->measurement_only) hooks.push_back(e);
+  }
+  // resolve of no pieces: only the hooks (the engines' own, applied as they apply them)
+  const effects::ResolvedPath reference = effects::resolve({}, {}, robot, hooks);
+  auto view = [&reference](Prediction p) {
+    Vector3 pose = p.true_end_pose;
+    reference.measure(pose, p.cov);
+    p.mean = pose_error(pose, p.odometry_end_pose);
+    return p;
+  };
+  Prediction out = view(parts.whole);
+  if (parts.corrected) {
+    const Prediction coarse2 = view(parts.coarse2), coarse1 = view(parts.coarse1);
+    out.noise_mean += coarse2.mean + coarse2.noise_mean - coarse1.mean - coarse1.noise_mean;
+    out.cov += coarse2.cov - coarse1.cov;
+  }
+  return out;
+}
+
+Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
+                              const std::vector<double>& durations_s, const Robot& robot,
+                              const EffectList& effects, int order, double heading0_rad,
+                              const CoarsePieces* coarse) {
+  return measured(predict_parts(pieces, durations_s, robot, effects, order, heading0_rad, coarse), robot, effects);
 }
 
 Prediction predict_with_order(const std::vector<ArcSegment>& pieces, const Robot& robot,

@@ -563,9 +563,9 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
   return out;
 }
 
-/// What a key tells apart: every number of the model (its residuals), or only those that move a
-/// run's prediction (residuals' `predictions`: the measurement noise and the grouped effects,
-/// group_variation, enter after it).
+/// What a key tells apart: every number of the model (its residuals), or only those that move
+/// the robot (residuals' `predictions`: the measurement noise, the measurement-only effects and
+/// the grouped ones, group_variation, enter after the prediction).
 enum class KeyOf { residuals, predictions };
 
 /// The cache key of a model: its numbers, bit for bit, with inert catalogue effects (all values
@@ -585,7 +585,7 @@ std::string model_key(const SuiteModel& m, KeyOf of = KeyOf::residuals) {
     const EffectInfo* info = info_of(e);
     bool inert = info && !e.custom && info->parameters.size() == e.values.size();
     for (std::size_t i = 0; inert && i < e.values.size(); ++i) inert = e.values[i] == info->parameters[i].neutral;
-    if (inert || (of == KeyOf::predictions && info && info->grouped)) continue;
+    if (inert || (of == KeyOf::predictions && info && (info->grouped || info->measurement_only))) continue;
     key += e.name;
     key += '\0';
     key += e.target;  // group_variation's varied parameter
@@ -658,7 +658,7 @@ struct ResidualCache::Store {
   CoarseRuns coarse;  // the logged runs' coarse pieces, made once for every model
   std::map<std::string, Entry<Partial>> by_model;
   /// Each run's prediction, by model_key(KeyOf::predictions): models that differ only in a
-  /// group's sd or the measurement noise share them.
+  /// reference offset, a group's sd or the measurement noise share them.
   std::map<std::string, Entry<RunPredictions>> predictions;
   std::map<std::string, Entry<Comparison>> comparisons;  // by model, alpha and the referee's options
   std::int64_t computed = 0;

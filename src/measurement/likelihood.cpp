@@ -61,12 +61,13 @@ GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<
           sd2_h2 * curvature / std::sqrt(2.0)};
 }
 
-/// The prediction in `kept` when it holds one, else predict()'s, stored there when given.
+/// What the reference sees of the parts in `kept` when it holds them, else of predict()'s,
+/// stored there when given.
 template <class Predict>
-Prediction kept_or_predicted(std::optional<Prediction>* kept, Predict&& predict) {
-  if (kept == nullptr) return predict();
+Prediction kept_or_predicted(std::optional<PredictionParts>* kept, const SuiteModel& model, Predict&& predict) {
+  if (kept == nullptr) return measured(predict(), model.robot, model.effects);
   if (!kept->has_value()) kept->emplace(predict());
-  return **kept;
+  return measured(**kept, model.robot, model.effects);
 }
 
 /// One planned path's prediction for a run that starts at `heading0_rad`, with its group terms:
@@ -74,12 +75,12 @@ Prediction kept_or_predicted(std::optional<Prediction>* kept, Predict&& predict)
 /// `kept` (when not nullptr) is the prediction's slot (residuals' `predictions`).
 void predict_path_runs(const SuiteExperiment& ex, const SuiteModel& model, const GroupTarget& target,
                        const Matrix3& meas, int group, double heading0_rad, std::size_t first,
-                       std::size_t count, std::vector<RunResidual>& out, std::optional<Prediction>* kept) {
+                       std::size_t count, std::vector<RunResidual>& out, std::optional<PredictionParts>* kept) {
   const double B = model.robot.wheelbase_m;
   std::vector<double> durations;
   const std::vector<ArcSegment> pieces = path_model_pieces(ex.path, B, model.effects, &durations);
-  const Prediction p = kept_or_predicted(kept, [&] {
-    return predict_with_order(pieces, durations, model.robot, model.effects, model.order, heading0_rad);
+  const Prediction p = kept_or_predicted(kept, model, [&] {
+    return predict_parts(pieces, durations, model.robot, model.effects, model.order, heading0_rad);
   });
   const GroupTerms g = group_terms(
       pieces, durations, model.robot, model.effects, target,
@@ -102,10 +103,10 @@ void size_slots(RunPredictions& slots, const Suite& suite) {
 /// A logged run's residual (its prediction kept in `kept` when not nullptr).
 void predict_logged_run(const SuiteRun& run, const SuiteModel& model, const GroupTarget& target,
                         const Matrix3& meas, int group, const CoarsePieces* coarse,
-                        std::optional<Prediction>* kept, RunResidual& out) {
-  const Prediction p = kept_or_predicted(kept, [&] {
-    return predict_with_order(run.pieces, run.durations_s, model.robot, model.effects, model.order,
-                              run.heading0_rad, coarse);
+                        std::optional<PredictionParts>* kept, RunResidual& out) {
+  const Prediction p = kept_or_predicted(kept, model, [&] {
+    return predict_parts(run.pieces, run.durations_s, model.robot, model.effects, model.order, run.heading0_rad,
+                         coarse);
   });
   const GroupTerms g = group_terms(run.pieces, run.durations_s, model.robot, model.effects, target, p.mean,
                                    &p.odometry_end_pose, run.heading0_rad);
@@ -195,7 +196,7 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     const std::size_t e = work[w].first, r = work[w].second;
     const SuiteExperiment& ex = suite.experiments[e];
     const int group = group_of[e];
-    std::optional<Prediction>* kept = predictions != nullptr ? &(*predictions)[e][r] : nullptr;
+    std::optional<PredictionParts>* kept = predictions != nullptr ? &(*predictions)[e][r] : nullptr;
     if (!ex.logged) {
       const std::size_t count = per_run ? 1 : ex.runs.size();
       predict_path_runs(ex, model, target, meas, group, per_run ? ex.runs[r].heading0_rad : 0.0, r, count, out[e],

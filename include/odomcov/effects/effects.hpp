@@ -128,6 +128,10 @@ struct EffectInfo {
   /// (turn_dependent_wheelbase at Eb_arc = Eb_spin is wheelbase_error): diagnose adopts it over
   /// one of them only when it fits significantly better (a likelihood ratio of nested models).
   std::vector<std::string> contains{};
+  /// True when the effect acts only on what the external reference sees (a measurement hook,
+  /// Effect::measure_model) and never on the motion (reference_offset): a run's prediction
+  /// before that view does not depend on it (predict_parts).
+  bool measurement_only = false;
 };
 
 /// What predictions with a list of effects need beyond the encoder pieces and their durations.

@@ -94,4 +94,22 @@ Prediction predict_with_order(const std::vector<ArcSegment>& pieces,
                               const EffectList& effects, int order, double heading0_rad = 0.0,
                               const CoarsePieces* coarse = nullptr);
 
+/// predict_with_order in two steps, for a caller that predicts again with only the values of
+/// measurement-only effects changed (EffectInfo::measurement_only: reference_offset):
+///  * predict_parts: the prediction without those effects, which do not move the robot (nor the
+///    grouped ones, which one run's prediction leaves to likelihood.hpp's group terms): `whole`
+///    (predict, or predict_second_order on pieces it cannot coarsen) and, for fine pieces at
+///    order 2, the coarse pieces' order-2 and order-1 predictions;
+///  * measured: what the external reference sees of them (each part through the hooks, then
+///    combined as predict_with_order says), predict_with_order's numbers bit for bit.
+struct PredictionParts {
+  Prediction whole;
+  bool corrected = false;  // coarse2 and coarse1 hold the order-2 correction's parts
+  Prediction coarse2, coarse1;
+};
+PredictionParts predict_parts(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
+                              const Robot& robot, const EffectList& effects, int order, double heading0_rad = 0.0,
+                              const CoarsePieces* coarse = nullptr);
+Prediction measured(const PredictionParts& parts, const Robot& robot, const EffectList& effects);
+
 }  // namespace odomcov

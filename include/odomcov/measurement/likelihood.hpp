@@ -50,15 +50,16 @@ struct RunResidual {
 /// residual does not depend on the others', and group indices count every experiment, so the
 /// marked ones get the same numbers as without.
 ///
-/// `predictions`, when given, keeps each run's prediction (predict_with_order, before the group
-/// terms and the measurement noise are added) from one call to the next: a run whose slot holds
-/// one reuses it, and a run predicted here fills its slot (a planned path's runs that share one
-/// prediction keep it in their first run's slot). The slots must come from models that predict
-/// the same: the same robot, order and effects, with at most group_variation's values and the
-/// measurement noise changed (neither moves a prediction: they enter after it). A fit of a group's
-/// sd then propagates no run again.
+/// `predictions`, when given, keeps each run's prediction (predict_parts: before the
+/// external reference's view, the group terms and the measurement noise) from one call to the
+/// next: a run whose slot holds one reuses it, and a run predicted here fills its slot (a
+/// planned path's runs that share one prediction keep it in their first run's slot). The slots
+/// must come from models that move the robot alike: the same robot, order and effects, with at
+/// most the values of measurement-only effects (reference_offset) and of group_variation, and the
+/// measurement noise, changed (they enter after the prediction). A fit of a reference offset or
+/// a group's sd then propagates no run again.
 using CoarseRuns = std::vector<std::vector<CoarsePieces>>;
-using RunPredictions = std::vector<std::vector<std::optional<Prediction>>>;
+using RunPredictions = std::vector<std::vector<std::optional<PredictionParts>>>;
 std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteModel& model,
                                                 const CoarseRuns* coarse = nullptr,
                                                 const std::vector<bool>* only = nullptr,
