@@ -37,17 +37,18 @@ class ReferenceOffset final : public Effect {
 }  // namespace
 
 EffectType reference_offset_type() {
-  EffectType type{{"reference_offset",
-           {{"dx", "m", -1e300, 1e300, false, false, 0.0, 0.01},
-            {"dy", "m", -1e300, 1e300, false, false, 0.0, 0.01}},
-           "the external reference tracks a point off the wheel-axle centre",
-           "a position error that depends only on the final heading (zero after a full turn, "
-           "largest after a half turn), not on the distance driven",
-           "measured xy = p + R(theta) d - d, d = (dx, dy) in the robot frame",
-           /*systematic=*/true},
-          [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
-            return std::make_unique<ReferenceOffset>(v[0], v[1]);
-          }};
+  EffectType type{
+      {"reference_offset",
+       {{"dx", "m", -1e300, 1e300, false, false, 0.0, 0.01},
+        {"dy", "m", -1e300, 1e300, false, false, 0.0, 0.01}},
+       "the external reference tracks a point off the wheel-axle centre",
+       "a position error that depends only on the final heading (zero after a full turn, "
+       "largest after a half turn), not on the distance driven",
+       "measured xy = p + R(theta) d - d, d = (dx, dy) in the robot frame",
+       /*systematic=*/true},
+      [](const std::vector<double>& v) -> std::unique_ptr<Effect> {
+        return std::make_unique<ReferenceOffset>(v[0], v[1]);
+      }};
   type.info.measurement_only = true;
   return type;
 }
