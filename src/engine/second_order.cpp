@@ -602,6 +602,11 @@ CoarsePieces coarsen(const std::vector<ArcSegment>& pieces, const std::vector<do
   return out;
 }
 
+bool enters_after_prediction(const EffectSpec& effect) {
+  const EffectInfo* info = info_of(effect);
+  return info && (info->measurement_only || info->grouped);
+}
+
 PredictionParts predict_parts(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                               const Robot& robot, const EffectList& effects, int order, double heading0_rad,
                               const CoarsePieces* coarse) {
@@ -611,8 +616,7 @@ PredictionParts predict_parts(const std::vector<ArcSegment>& pieces, const std::
   // measurement-only effect's parameter.
   EffectList moving;
   for (const EffectSpec& e : effects) {
-    const EffectInfo* info = info_of(e);
-    if (!(info && (info->measurement_only || info->grouped))) moving.push_back(e);
+    if (!enters_after_prediction(e)) moving.push_back(e);
   }
   const bool given_usable = coarse != nullptr && coarse->wheelbase_m == robot.wheelbase_m;
   PredictionParts out;

@@ -585,7 +585,7 @@ std::string model_key(const SuiteModel& m, KeyOf of = KeyOf::residuals) {
     const EffectInfo* info = info_of(e);
     bool inert = info && !e.custom && info->parameters.size() == e.values.size();
     for (std::size_t i = 0; inert && i < e.values.size(); ++i) inert = e.values[i] == info->parameters[i].neutral;
-    if (inert || (of == KeyOf::predictions && info && (info->grouped || info->measurement_only))) continue;
+    if (inert || (of == KeyOf::predictions && enters_after_prediction(e))) continue;
     key += e.name;
     key += '\0';
     key += e.target;  // group_variation's varied parameter

@@ -107,6 +107,10 @@ struct PredictionParts {
   bool corrected = false;  // coarse2 and coarse1 hold the order-2 correction's parts
   Prediction coarse2, coarse1;
 };
+/// Whether predict_parts leaves the effect out: a measurement-only one, or a grouped one
+/// (group_variation), whose terms likelihood.hpp adds after one run's prediction. What keys
+/// kept predictions must leave out the same (calibration.cpp's model_key).
+bool enters_after_prediction(const EffectSpec& effect);
 PredictionParts predict_parts(const std::vector<ArcSegment>& pieces, const std::vector<double>& durations_s,
                               const Robot& robot, const EffectList& effects, int order, double heading0_rad = 0.0,
                               const CoarsePieces* coarse = nullptr);
