@@ -158,5 +158,10 @@ if want optiodom; then
   save "$out/custom.md" "$python" scripts/loop_summary.py "${custom[@]}"
   save "$out/group.md" "$python" scripts/loop_summary.py "all (session groups)=$out/calibrate_all.json" \
     "all (day groups)=$suite-calibrate-all_day"
+  # In-sample reach: how near 3 the model family gets on the runs a hold-out judges (the Ivanjko
+  # paths, each campaign) when it has seen them: the all-runs model, its effects refitted on them,
+  # and calibrate on them alone.
+  save "$out/reach.md" "$python" scripts/optiodom_reach.py "$odomcov" "$suite" "$out/model_all.yaml" \
+    "$out/calibrate_all.json" "$suite-reach"
 fi
 echo "results regenerated in $results" >&2
