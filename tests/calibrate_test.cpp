@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/domain.hpp"
@@ -605,6 +606,22 @@ TEST(Calibrate, TheStandardLabEndToEnd) {
   EXPECT_LT(c.holdout->summary.nees_mean, 3.76);
   ASSERT_EQ(c.holdout->nees_by_kind.size(), 1u);
   EXPECT_EQ(c.holdout->nees_by_kind[0].first, "arc");
+  // The training runs by kind: every training kind once, in order of first appearance, and
+  // their run-weighted mean is the whole NEES mean.
+  std::vector<std::string> kinds;
+  std::map<std::string, double> runs;
+  for (const SuiteExperiment& ex : train.experiments) {
+    if (!runs.count(ex.kind)) kinds.push_back(ex.kind);
+    runs[ex.kind] += static_cast<double>(ex.runs.size());
+  }
+  ASSERT_EQ(c.nees_by_kind.size(), kinds.size());
+  double weighted = 0.0, total = 0.0;
+  for (std::size_t i = 0; i < kinds.size(); ++i) {
+    EXPECT_EQ(c.nees_by_kind[i].first, kinds[i]);
+    weighted += c.nees_by_kind[i].second * runs[kinds[i]];
+    total += runs[kinds[i]];
+  }
+  EXPECT_NEAR(weighted / total, c.after.nees_mean, 1e-12 * c.after.nees_mean);
   // The arcs' mean wheel speed (0.25 m/s) is below every training run's.
   ASSERT_FALSE(c.holdout->extrapolation.empty());
   EXPECT_EQ(c.holdout->extrapolation[0].rfind("arc-left: speed 0.25 m/s is below the training range", 0), 0u);

@@ -141,6 +141,9 @@ def test_calibrate_gives_calibrate_json():
     held = odomcov.calibrate(suite, rounds=1, holdout=suite)
     assert set(held["holdout"]) >= {"nees_mean", "verdict", "by_kind", "extrapolation"}
     assert held["holdout"]["extrapolation"] == []  # its own runs lie in its training domain
+    # the same runs in and out of sample: the same NEES per kind, one kind
+    assert len(held["after"]["by_kind"]) == 1
+    assert held["after"]["by_kind"] == pytest.approx(held["holdout"]["by_kind"], rel=1e-12)
     with pytest.raises(ValueError):
         odomcov.calibrate(suite, rounds=0)
     with pytest.raises(ValueError):

@@ -110,6 +110,12 @@ void write_rounds(std::ostream& out, const CalibrateResult& c) {
   for (const std::string& s : c.simplified) out << "  after the rounds: " << s << "\n";
 }
 
+void write_by_kind(std::ostream& out, const NeesByKind& nees) {
+  out << "  NEES by kind:";
+  for (const auto& [kind, value] : nees) out << " " << kind << " " << fixed(value, 2);
+  out << "\n";
+}
+
 void write_model(std::ostream& out, const CalibrateResult& c) {
   out << "\nJoint fit of everything named (full likelihood): " << c.joint_note << "\n";
   for (std::size_t i = 0; i < c.joint.names.size(); ++i) {
@@ -121,6 +127,7 @@ void write_model(std::ostream& out, const CalibrateResult& c) {
   out << "\nThe calibrated model (model.yaml; paste over a suite's robot line and model block):\n"
       << model_yaml(c.model) << "against the training runs: log-likelihood " << fixed(c.after.log_likelihood, 2)
       << ", NEES mean " << fixed(c.after.nees_mean, 3) << ", " << c.after.verdict << "\n";
+  write_by_kind(out, c.nees_by_kind);
 }
 
 void write_verdict(std::ostream& out, const CalibrateResult& c, double alpha) {
@@ -142,9 +149,8 @@ void write_verdict(std::ostream& out, const CalibrateResult& c, double alpha) {
 
 void write_holdout(std::ostream& out, const HoldoutSummary& h) {
   out << "\nHeld-out runs (never seen by the loop): NEES mean " << fixed(h.summary.nees_mean, 3) << ", "
-      << h.consistent << " of " << h.experiments << " experiments consistent, " << h.summary.verdict << "\n  NEES by kind:";
-  for (const auto& [kind, nees] : h.nees_by_kind) out << " " << kind << " " << fixed(nees, 2);
-  out << "\n";
+      << h.consistent << " of " << h.experiments << " experiments consistent, " << h.summary.verdict << "\n";
+  write_by_kind(out, h.nees_by_kind);
   if (h.extrapolation.empty()) {
     out << "  every held-out experiment lies inside the training domain\n";
     return;

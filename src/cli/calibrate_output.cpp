@@ -241,12 +241,17 @@ json stand_ins_json(const std::vector<StandIn>& stand_ins) {
   return out;
 }
 
-json holdout_json(const HoldoutSummary& h) {
+json by_kind_json(const NeesByKind& nees) {
   json kinds = json::object();
-  for (const auto& [kind, nees] : h.nees_by_kind) kinds[kind] = nees;
+  for (const auto& [kind, value] : nees) kinds[kind] = value;
+  return kinds;
+}
+
+json holdout_json(const HoldoutSummary& h) {
   return {{"nees_mean", h.summary.nees_mean}, {"verdict", h.summary.verdict},
           {"log_likelihood", h.summary.log_likelihood}, {"experiments", h.experiments},
-          {"consistent_experiments", h.consistent}, {"by_kind", kinds}, {"extrapolation", h.extrapolation}};
+          {"consistent_experiments", h.consistent}, {"by_kind", by_kind_json(h.nees_by_kind)},
+          {"extrapolation", h.extrapolation}};
 }
 
 json diff_drive_json(const DiffDriveParameters& p) {
@@ -279,6 +284,7 @@ json calibrate_json(const Suite& suite, const SuiteModel& start, const Calibrate
   out["unresolved"] = c.unresolved;
   out["simplified"] = c.simplified;
   out["stand_ins"] = stand_ins_json(c.stand_ins);
+  out["after"]["by_kind"] = by_kind_json(c.nees_by_kind);
   out["joint_fit"] = c.joint.names.empty() ? json(nullptr) : fit_json(c.joint);
   if (!c.explained) out["residuals"] = residuals_json(c.residuals);
   if (c.holdout) {

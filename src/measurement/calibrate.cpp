@@ -297,6 +297,7 @@ void account(const Suite& suite, const CalibrateOptions& options, DiagnoseProgre
              CalibrateResult& out) {
   const Comparison& c = cache.comparison(out.model, options.diagnose.alpha, options.diagnose.calibration);
   out.after = summarise(c);
+  out.nees_by_kind = nees_by_kind(suite, c);
   out.explained = c.verdict.consistent();
   // Gatekeeping: a model that compare finds consistent is not searched for stand-ins, so the
   // claims that the runs are not explained (compare's, then the stand-ins') are made at alpha
@@ -371,24 +372,32 @@ std::vector<std::string> joint_parameters(const SuiteModel& model, bool noise_le
   return names;
 }
 
+NeesByKind nees_by_kind(const Suite& suite, const Comparison& comparison) {
+  std::vector<std::string> kinds;
+  std::map<std::string, std::pair<double, double>> nees;  // kind -> (sum of NEES, runs)
+  for (std::size_t e = 0; e < suite.experiments.size() && e < comparison.experiments.size(); ++e) {
+    const ExperimentComparison& c = comparison.experiments[e];
+    const std::string kind = experiment_kind(suite.experiments[e]);
+    if (!nees.count(kind)) kinds.push_back(kind);
+    nees[kind].first += c.nees_mean * static_cast<double>(c.n);
+    nees[kind].second += static_cast<double>(c.n);
+  }
+  NeesByKind out;
+  for (const std::string& k : kinds) out.push_back({k, nees[k].first / nees[k].second});
+  return out;
+}
+
 HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha,
                              const CalibrationOptions& calibration) {
   HoldoutSummary out;
   out.comparison = compare(holdout, model, alpha, calibration);
   out.summary = summarise(out.comparison);
-  std::vector<std::string> kinds;
-  std::map<std::string, std::pair<double, double>> nees;  // kind -> (sum of NEES, runs)
-  for (std::size_t e = 0; e < holdout.experiments.size(); ++e) {
-    const ExperimentComparison& c = out.comparison.experiments[e];
-    const std::string kind = experiment_kind(holdout.experiments[e]);
-    if (!nees.count(kind)) kinds.push_back(kind);
-    nees[kind].first += c.nees_mean * static_cast<double>(c.n);
-    nees[kind].second += static_cast<double>(c.n);
+  out.nees_by_kind = nees_by_kind(holdout, out.comparison);
+  for (const ExperimentComparison& c : out.comparison.experiments) {
     ++out.experiments;
     out.consistent += c.verdict.consistent();
     for (const std::string& x : c.extrapolation) out.extrapolation.push_back(c.name + ": " + x);
   }
-  for (const std::string& k : kinds) out.nees_by_kind.push_back({k, nees[k].first / nees[k].second});
   return out;
 }
 

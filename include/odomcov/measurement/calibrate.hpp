@@ -25,14 +25,17 @@ struct CalibrateOptions {
   int rounds = kCalibrateRounds;
 };
 
+/// The NEES mean per run by kind of experiment (SuiteExperiment::kind), in order of first
+/// appearance: of `comparison`, which is of `suite`'s experiments.
+using NeesByKind = std::vector<std::pair<std::string, double>>;
+NeesByKind nees_by_kind(const Suite& suite, const Comparison& comparison);
+
 /// A model judged on runs it was not fitted on.
 struct HoldoutSummary {
   Comparison comparison;
   ModelSummary summary;
   std::size_t experiments = 0, consistent = 0;
-  /// The NEES mean per run by kind of experiment (SuiteExperiment::kind), in order of first
-  /// appearance.
-  std::vector<std::pair<std::string, double>> nees_by_kind;
+  NeesByKind nees_by_kind;  // of the held-out runs
   /// "experiment: speed 0.104 m/s is above the training range ..." for every experiment
   /// outside the model's training domain (extrapolation()).
   std::vector<std::string> extrapolation;
@@ -103,6 +106,7 @@ struct CalibrateResult {
   /// The final model, with its training domain (SuiteModel::domain).
   SuiteModel model;
   ModelSummary after;  // the final model against the training runs
+  NeesByKind nees_by_kind;  // ... by kind of experiment
   bool explained = false;  // compare finds the final model consistent with the training runs
   /// When the final model is not explained: its systematic effects whose size changes along a
   /// feature (StandIn), at most one per effect (its most significant).
