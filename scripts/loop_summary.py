@@ -1,10 +1,11 @@
 #!/usr/bin/python3
 """One Markdown table across several `odomcov calibrate` runs (e.g. the OptiOdom splits), from
 their calibrate.json files (docs/json.md, "calibrate"): per run, the effects adopted in order,
-the final model's sizes ± standard errors, the NEES and log-likelihood on the training runs, the
-NEES on the held-out runs (pooled, per kind of path, experiments consistent, experiments outside the training
-domain), the candidates the cross-validation stopped, and the verdict. Every figure is
-calibrate's; this script only lays them side by side.
+the final model's sizes ± standard errors, the NEES and log-likelihood on the training runs
+(and their NEES per kind of path), the NEES on the held-out runs (pooled, per kind of path,
+experiments consistent, experiments outside the training domain), the candidates the
+cross-validation stopped, and the verdict. Every figure is calibrate's; this script only lays
+them side by side.
 
 Usage: loop_summary.py NAME=CALIBRATE_DIR_OR_JSON [NAME=... ...] > summary.md
 """
@@ -84,6 +85,14 @@ def main():
         cells = [name, f"{after['nees_mean']:.2f}", after["verdict"], f"{after['log_likelihood']:.1f}"]
         cells += held_out_cells(r.get("holdout"), kinds) if held else []
         print("| " + " | ".join(cells) + " |")
+    trained = sorted({k for _, r in runs for k in r["after"].get("by_kind", {})})
+    if trained:
+        print("\n## NEES per run on the training runs, by kind of path (in-sample)\n")
+        print("| split | " + " | ".join(trained) + " |")
+        print("|---|" + "---|" * len(trained))
+        for name, r in runs:
+            by_kind = r["after"].get("by_kind", {})
+            print(f"| {name} | " + " | ".join(f"{by_kind[k]:.2f}" if k in by_kind else "" for k in trained) + " |")
     print("\n## Significant candidates the guards stopped (docs/calibrate.md, \"Guards\")\n")
     for name, r in runs:
         print(f"- {name}: " + ("; ".join(stopped(r)) or "none"))
