@@ -31,6 +31,8 @@ for c in d["candidates_cv"]:
     assert set(c) >= {"effect", "gain_in_sample", "gain_held_out", "verdict"}, c
 assert set(d["holdout"]) >= {"nees_mean", "verdict", "by_kind", "extrapolation"}, d["holdout"]
 assert list(d["holdout"]["by_kind"]) == ["arc"], d["holdout"]["by_kind"]
+refit = d["holdout"]["refitted"]
+assert list(refit["by_kind"]) == ["arc"] and refit["log_likelihood_after"] >= d["holdout"]["log_likelihood"] - 1e-6, refit
 assert sorted(d["after"]["by_kind"]) == ["forward", "line", "spin", "umbmark"], d["after"]["by_kind"]
 for n in d["next_experiments"]:
     assert set(n) >= {"name", "path", "runs", "expected_stderr"}, n

@@ -606,6 +606,18 @@ TEST(Calibrate, TheStandardLabEndToEnd) {
   EXPECT_LT(c.holdout->summary.nees_mean, 3.76);
   ASSERT_EQ(c.holdout->nees_by_kind.size(), 1u);
   EXPECT_EQ(c.holdout->nees_by_kind[0].first, "arc");
+  // The same effects refitted on the held-out arcs: from the held-out model's likelihood, never
+  // below it, and (two parameters on 60 runs) as consistent as the prediction.
+  ASSERT_TRUE(c.holdout->refitted);
+  const HoldoutSummary::Refitted& refit = *c.holdout->refitted;
+  EXPECT_EQ(refit.fit.names, c.joint.names);
+  EXPECT_NEAR(refit.fit.log_likelihood_before, c.holdout->summary.log_likelihood,
+              1e-9 * std::abs(c.holdout->summary.log_likelihood));
+  EXPECT_GE(refit.fit.log_likelihood_after, refit.fit.log_likelihood_before);
+  EXPECT_GT(refit.nees_mean, 2.32);
+  EXPECT_LT(refit.nees_mean, 3.76);
+  ASSERT_EQ(refit.nees_by_kind.size(), 1u);
+  EXPECT_DOUBLE_EQ(refit.nees_by_kind[0].second, refit.nees_mean);
   // The training runs by kind: every training kind once, in order of first appearance, and
   // their run-weighted mean is the whole NEES mean.
   std::vector<std::string> kinds;

@@ -144,6 +144,9 @@ def test_calibrate_gives_calibrate_json():
     # the same runs in and out of sample: the same NEES per kind, one kind
     assert len(held["after"]["by_kind"]) == 1
     assert held["after"]["by_kind"] == pytest.approx(held["holdout"]["by_kind"], rel=1e-12)
+    # the model's effects refitted on the held-out runs: none to refit when nothing was named
+    assert "refitted" in held["holdout"]
+    assert (held["holdout"]["refitted"] is None) == (held["named"] == [])
     with pytest.raises(ValueError):
         odomcov.calibrate(suite, rounds=0)
     with pytest.raises(ValueError):

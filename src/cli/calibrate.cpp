@@ -110,8 +110,8 @@ void write_rounds(std::ostream& out, const CalibrateResult& c) {
   for (const std::string& s : c.simplified) out << "  after the rounds: " << s << "\n";
 }
 
-void write_by_kind(std::ostream& out, const NeesByKind& nees) {
-  out << "  NEES by kind:";
+void write_by_kind(std::ostream& out, const NeesByKind& nees, const char* indent = "  ") {
+  out << indent << "NEES by kind:";
   for (const auto& [kind, value] : nees) out << " " << kind << " " << fixed(value, 2);
   out << "\n";
 }
@@ -151,6 +151,14 @@ void write_holdout(std::ostream& out, const HoldoutSummary& h) {
   out << "\nHeld-out runs (never seen by the loop): NEES mean " << fixed(h.summary.nees_mean, 3) << ", "
       << h.consistent << " of " << h.experiments << " experiments consistent, " << h.summary.verdict << "\n";
   write_by_kind(out, h.nees_by_kind);
+  if (h.refitted) {
+    out << "  the same effects fitted on these runs themselves (the best they do having seen them; a prediction "
+           "is not expected to do better): NEES mean "
+        << fixed(h.refitted->nees_mean, 3) << ", log-likelihood " << fixed(h.refitted->fit.log_likelihood_after, 2)
+        << " against " << fixed(h.summary.log_likelihood, 2) << " held out\n";
+    write_by_kind(out, h.refitted->nees_by_kind, "    ");
+    for (const std::string& p : h.refitted->fit.at_bound) out << "    " << p << " ends at a bound of its range there\n";
+  }
   if (h.extrapolation.empty()) {
     out << "  every held-out experiment lies inside the training domain\n";
     return;

@@ -248,10 +248,16 @@ json by_kind_json(const NeesByKind& nees) {
 }
 
 json holdout_json(const HoldoutSummary& h) {
+  json refitted = nullptr;
+  if (h.refitted) {
+    refitted = fit_json(h.refitted->fit);
+    refitted["nees_mean"] = h.refitted->nees_mean;
+    refitted["by_kind"] = by_kind_json(h.refitted->nees_by_kind);
+  }
   return {{"nees_mean", h.summary.nees_mean}, {"verdict", h.summary.verdict},
           {"log_likelihood", h.summary.log_likelihood}, {"experiments", h.experiments},
           {"consistent_experiments", h.consistent}, {"by_kind", by_kind_json(h.nees_by_kind)},
-          {"extrapolation", h.extrapolation}};
+          {"extrapolation", h.extrapolation}, {"refitted", refitted}};
 }
 
 json diff_drive_json(const DiffDriveParameters& p) {

@@ -387,6 +387,27 @@ NeesByKind nees_by_kind(const Suite& suite, const Comparison& comparison) {
   return out;
 }
 
+namespace {
+
+/// HoldoutSummary::refitted: the model's effects fitted on the held-out runs as joint_fit fits
+/// them on the training runs.
+std::optional<HoldoutSummary::Refitted> refit_on_holdout(const Suite& holdout, const SuiteModel& model,
+                                                         bool noise_level, const CalibrateOptions& options,
+                                                         DiagnoseProgress* progress) {
+  if (joint_parameters(model, noise_level).empty()) return std::nullopt;
+  ResidualCache cache(holdout);
+  HoldoutSummary::Refitted out;
+  out.fit = fit_all(holdout, model, noise_level, options, progress, cache);
+  CalibrationOptions gaussian;
+  gaussian.method = CalibrationMethod::gaussian;
+  const Comparison c = compare(holdout, out.fit.model, options.diagnose.alpha, cache.at(out.fit.model), gaussian);
+  out.nees_mean = summarise(c).nees_mean;
+  out.nees_by_kind = nees_by_kind(holdout, c);
+  return out;
+}
+
+}  // namespace
+
 HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha,
                              const CalibrationOptions& calibration) {
   HoldoutSummary out;
@@ -419,6 +440,7 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
     SuiteModel judged = out.model;
     judged.measurement_noise = holdout->measurement_noise;
     out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha, options.diagnose.calibration);
+    out.holdout->refitted = refit_on_holdout(*holdout, judged, named_noise_level(out.named), options, progress);
   }
   return out;
 }

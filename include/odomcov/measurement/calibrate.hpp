@@ -39,6 +39,17 @@ struct HoldoutSummary {
   /// "experiment: speed 0.104 m/s is above the training range ..." for every experiment
   /// outside the model's training domain (extrapolation()).
   std::vector<std::string> extrapolation;
+  /// The same effects refitted on the held-out runs themselves (every parameter the joint fit
+  /// refits, from the model's values): how near 3 the model's effects get on these runs when
+  /// they have seen them. A prediction is not expected to come nearer; what lies between the
+  /// two is in the sizes the training runs gave the effects, what is left beyond in effects
+  /// the model does not have. Empty when the model has nothing to fit.
+  struct Refitted {
+    FitResult fit;
+    double nees_mean = 0.0;  // Gaussian reference (the NEES mean does not depend on it)
+    NeesByKind nees_by_kind;
+  };
+  std::optional<Refitted> refitted;
 };
 
 /// The calibrated model as ROS 2's diff_drive_controller takes it (docs/calibrate.md):
