@@ -3,9 +3,9 @@
 their calibrate.json files (docs/json.md, "calibrate"): per run, the effects adopted in order,
 the final model's sizes ± standard errors, the NEES and log-likelihood on the training runs
 (and their NEES per kind of path), the NEES on the held-out runs (pooled, per kind of path,
-experiments consistent, experiments outside the training domain), the candidates the
-cross-validation stopped, and the verdict. Every figure is calibrate's; this script only lays
-them side by side.
+the model's effects refitted on them, experiments consistent, experiments outside the training
+domain), the candidates the cross-validation stopped, and the verdict. Every figure is
+calibrate's; this script only lays them side by side.
 
 Usage: loop_summary.py NAME=CALIBRATE_DIR_OR_JSON [NAME=... ...] > summary.md
 """
@@ -41,11 +41,12 @@ def sizes(report):
 
 def held_out_cells(held, kinds):
     if not held:
-        return [""] * (len(kinds) + 3)
+        return [""] * (len(kinds) + 4)
     by_kind = [f"{held['by_kind'][k]:.2f}" if k in held["by_kind"] else "" for k in kinds]
     # holdout.extrapolation has one entry per experiment and feature, "name: feature ...".
     outside = len({x.split(": ", 1)[0] for x in held["extrapolation"]})
-    return by_kind + [f"**{held['nees_mean']:.2f}**",
+    refitted = held.get("refitted")
+    return by_kind + [f"**{held['nees_mean']:.2f}**", f"{refitted['nees_mean']:.2f}" if refitted else "",
                       f"{held['consistent_experiments']} of {held['experiments']}", str(outside)]
 
 
@@ -75,7 +76,8 @@ def main():
     held = any(r.get("holdout") for _, r in runs)
     columns = ["split", "training runs", "training verdict", "training log-likelihood"] + (
         [f"held out: {k}" for k in kinds]
-        + ["held out, pooled", "held-out experiments consistent", "held-out experiments outside the domain"]
+        + ["held out, pooled", "the effects refitted on the held-out runs", "held-out experiments consistent",
+           "held-out experiments outside the domain"]
         if held else [])
     print("\n## NEES per run (3 is right)\n")
     print("| " + " | ".join(columns) + " |")
