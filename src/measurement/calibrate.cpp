@@ -442,6 +442,8 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
     out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha, options.diagnose.calibration);
     out.holdout->refitted = refit_on_holdout(*holdout, judged, named_noise_level(out.named), options, progress);
   }
+  // An interrupt during the steps after the rounds: nothing is returned, so nothing is written.
+  if (progress && progress->cancel.load()) throw Cancelled();
   return out;
 }
 
