@@ -2,7 +2,7 @@
 """How near 3 the model family gets on a set of runs when it has seen them: the bound a hold-out
 figure on those runs can be read against.
 
-For each subset of the imported OptiOdom suite (by experiment name), two in-sample figures:
+For each subset of the imported OptiOdom suite (by experiment name), three in-sample figures:
   * the NEES mean of the model calibrate built on all the runs (MODEL, calibrate's model.yaml),
     by `odomcov compare` on the subset with that model pasted in;
   * the same after `odomcov fit` refits that model's parameters on the subset (the all-runs
@@ -16,9 +16,10 @@ Usage: optiodom_reach.py ODOMCOV SUITE_DIR MODEL CALIBRATE_JSON WORK_DIR > reach
 import json
 import os
 import re
+import shutil
 import sys
 
-from suite_tools import copy_suite, model_of, run, set_model
+from suite_tools import model_of, run, select_experiments, set_model
 
 SUBSETS = [
     ("Ivanjko paths", r"^ivanjko-"),
@@ -28,18 +29,6 @@ SUBSETS = [
     ("December 2020 squares", r"^square-2312"),
     ("June 2020", r"^[a-z]+-(2306|2506)"),
 ]
-
-
-def subset(suite, pattern, to):
-    """Writes `suite` with only the experiments whose names match `pattern` to `to`."""
-    copy_suite(suite, to)
-    with open(to) as f:
-        head, body = f.read().split("experiments:\n", 1)
-    blocks = [b for b in re.split(r"(?m)^(?=  - name:)", body) if b.strip()]
-    keep = [b for b in blocks if re.search(pattern, re.search(r'name: "?([^"\n]+)', b).group(1))]
-    with open(to, "w") as f:
-        f.write(head + "experiments:\n" + "".join(keep))
-    return sum(b.count(".csv") for b in keep)
 
 
 def nees(odomcov, suite, out):
@@ -61,9 +50,9 @@ def main():
     for label, pattern in SUBSETS:
         name = re.sub(r"[^a-z0-9]+", "_", label.lower()).strip("_")
         alone = os.path.join(work, name + ".yaml")
-        runs = subset(suite, pattern, alone)
+        runs = select_experiments(suite, pattern, alone)
         with_model = os.path.join(work, name + "_all_model.yaml")
-        subset(suite, pattern, with_model)
+        shutil.copyfile(alone, with_model)
         set_model(with_model, model_of(model))
         nees_all = nees(odomcov, with_model, os.path.join(work, name + "_compare.json"))
         refit_json = os.path.join(work, name + "_refit.json")

@@ -63,3 +63,16 @@ def set_model(suite, yaml_text):
     lines[at:at] = new[1:]
     with open(suite, "w") as f:
         f.write("\n".join(lines) + "\n")
+
+
+def select_experiments(suite, pattern, to):
+    """Copies a suite to `to` (as copy_suite) keeping only the experiments whose names match the
+    regex `pattern`; returns how many runs (logged CSVs) they have."""
+    copy_suite(suite, to)
+    with open(to) as f:
+        head, body = f.read().split("experiments:\n", 1)
+    blocks = [b for b in re.split(r"(?m)^(?=  - name:)", body) if b.strip()]
+    keep = [b for b in blocks if re.search(pattern, re.search(r'name: "?([^"\n]+)', b).group(1))]
+    with open(to, "w") as f:
+        f.write(head + "experiments:\n" + "".join(keep))
+    return sum(b.count(".csv") for b in keep)
