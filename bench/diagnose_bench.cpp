@@ -8,7 +8,8 @@
 //    group_variation's: the imported sessions are groups);
 //  * BM_Fit: the joint fit of Ed and Eb;
 //  * BM_Calibrate: odomcov calibrate on every run (cross-validation included): diagnose
-//    rounds, adoption, the joint fit, confounded pairs and next experiments (fast path only).
+//    rounds, adoption, the joint fit, confounded pairs and next experiments (fast path only);
+//  * BM_Predictive: the Ivanjko hold-out predicted with what the training runs leave unknown.
 // Each on the fast path (FitPath::fast: linearised, re-anchored) and, with
 // ODOMCOV_BENCH_EXACT=1 in the environment, the exact one (~40 s CPU per round). The counter
 // `propagations` is the number of exact likelihood evaluations per iteration.
@@ -176,6 +177,39 @@ void BM_CompareSimulation(benchmark::State& state) {
   state.counters["runs"] = static_cast<double>(runs(suite));
 }
 
+/// calibrate's prediction of held-out runs with what the training runs leave unknown
+/// (holdout.predictive) for the Ivanjko hold-out, with the in-sample loop's model: the training
+/// runs' Fisher information in the joint fit's parameters and every absent systematic catalogue
+/// effect's (training_uncertainty), then the held-out runs' sensitivities (predictive_check).
+/// Counters: the parameters, and the two NEES means.
+void BM_Predictive(benchmark::State& state) {
+  const odomcov::Suite& suite = optiodom_model_all();
+  odomcov::Suite training = suite, held = suite;
+  auto keep = [](odomcov::Suite& s, bool ivanjko) {
+    auto& ex = s.experiments;
+    ex.erase(std::remove_if(ex.begin(), ex.end(), [&](const odomcov::SuiteExperiment& e) {
+               return (e.name.rfind("ivanjko-", 0) == 0) != ivanjko;
+             }),
+             ex.end());
+  };
+  keep(training, false);
+  keep(held, true);
+  const odomcov::SuiteModel model = odomcov::suite_model(suite);
+  double parameters = 0, plugin = 0, predictive = 0;
+  for (auto _ : state) {
+    const odomcov::TrainingUncertainty u =
+        odomcov::training_uncertainty(training, model, odomcov::joint_parameters(model, false));
+    const odomcov::PredictiveCheck c = odomcov::predictive_check(held, u);
+    parameters = static_cast<double>(u.names.size());
+    plugin = c.plugin_mean;
+    predictive = c.predictive_mean;
+  }
+  state.counters["parameters"] = parameters;
+  state.counters["nees_plugin"] = plugin;
+  state.counters["nees_predictive"] = predictive;
+  state.counters["runs"] = static_cast<double>(runs(suite));
+}
+
 const bool kExact = std::getenv("ODOMCOV_BENCH_EXACT") != nullptr;
 
 BENCHMARK(BM_Likelihood)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
@@ -183,6 +217,7 @@ BENCHMARK(BM_CompareSimulation)->Arg(0)->Arg(1)->Unit(benchmark::kSecond)->Measu
 BENCHMARK(BM_DiagnoseRound)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 BENCHMARK(BM_Calibrate)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
 BENCHMARK(BM_Fit)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
+BENCHMARK(BM_Predictive)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 const bool kRegistered = kExact && [] {
   benchmark::RegisterBenchmark("BM_DiagnoseRound/exact", [](benchmark::State& s) { BM_DiagnoseRound(s); })
       ->Arg(1)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);

@@ -3,7 +3,8 @@
 their calibrate.json files (docs/json.md, "calibrate"): per run, the effects adopted in order,
 the final model's sizes ± standard errors, the NEES and log-likelihood on the training runs
 (and their NEES per kind of path), the NEES on the held-out runs (pooled, per kind of path,
-the model's effects refitted on them, experiments consistent, experiments outside the training
+the model's effects refitted on them, the marginal NEES of the model, of the training
+posterior of what it sized and of everything, experiments consistent, experiments outside the training
 domain), the candidates the cross-validation stopped, and the verdict. Every figure is
 calibrate's; this script only lays them side by side.
 
@@ -41,12 +42,16 @@ def sizes(report):
 
 def held_out_cells(held, kinds):
     if not held:
-        return [""] * (len(kinds) + 4)
+        return [""] * (len(kinds) + 7)
     by_kind = [f"{held['by_kind'][k]:.2f}" if k in held["by_kind"] else "" for k in kinds]
     # holdout.extrapolation has one entry per experiment and feature, "name: feature ...".
     outside = len({x.split(": ", 1)[0] for x in held["extrapolation"]})
     refitted = held.get("refitted")
+    predictive = held.get("predictive")
     return by_kind + [f"**{held['nees_mean']:.2f}**", f"{refitted['nees_mean']:.2f}" if refitted else "",
+                      f"{predictive['plugin_nees_mean']:.2f}" if predictive else "",
+                      f"{predictive['sized_nees_mean']:.2f}" if predictive else "",
+                      f"{predictive['nees_mean']:.2f}" if predictive else "",
                       f"{held['consistent_experiments']} of {held['experiments']}", str(outside)]
 
 
@@ -76,7 +81,10 @@ def main():
     held = any(r.get("holdout") for _, r in runs)
     columns = ["split", "training runs", "training verdict", "training log-likelihood"] + (
         [f"held out: {k}" for k in kinds]
-        + ["held out, pooled", "the effects refitted on the held-out runs", "held-out experiments consistent",
+        + ["held out, pooled", "the effects refitted on the held-out runs",
+           "held out, marginal (no run conditioned on another)",
+           "held out, marginal, with the training posterior of what it sized",
+           "held out, marginal, with the priors of what it did not size besides", "held-out experiments consistent",
            "held-out experiments outside the domain"]
         if held else [])
     print("\n## NEES per run (3 is right)\n")

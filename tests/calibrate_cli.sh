@@ -19,6 +19,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 for f in model.yaml calibrate.json diff_drive.yaml; do [ -s "$work/cal/$f" ] || fail "no $f"; done
 grep -q "wheel_diameter_ratio" "$work/report.txt" || fail "report does not name wheel_diameter_ratio"
 grep -q "wheelbase_error" "$work/report.txt" || fail "report does not name wheelbase_error"
+grep -q "each run's marginal NEES (no run conditioned on another)" "$work/report.txt" || fail "report has no posterior prediction"
 /usr/bin/python3 - "$work/cal" <<'PY' || fail "calibrate.json or diff_drive.yaml"
 import json, sys
 d = json.load(open(sys.argv[1] + "/calibrate.json"))
@@ -34,6 +35,12 @@ assert list(d["holdout"]["by_kind"]) == ["arc"], d["holdout"]["by_kind"]
 refit = d["holdout"]["refitted"]
 assert list(refit["by_kind"]) == ["arc"] and refit["log_likelihood_after"] >= d["holdout"]["log_likelihood"] - 1e-6, refit
 assert sorted(d["after"]["by_kind"]) == ["forward", "line", "spin", "umbmark"], d["after"]["by_kind"]
+pred = d["holdout"]["predictive"]
+for key in ("plugin_nees_mean", "plugin_by_kind", "sized_nees_mean", "sized_by_kind", "nees_mean", "by_kind"):
+    assert key in pred, key
+assert list(pred["sized_by_kind"]) == ["arc"], pred["sized_by_kind"]
+for q in pred["parameters"]:
+    assert set(q) == {"name", "prior_sd", "posterior_sd", "shift", "sized", "spread"} and q["spread"] >= 0.1, q
 for n in d["next_experiments"]:
     assert set(n) >= {"name", "path", "runs", "expected_stderr"}, n
 text = open(sys.argv[1] + "/diff_drive.yaml").read()

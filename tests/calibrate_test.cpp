@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <boost/math/distributions/chi_squared.hpp>
+#include <boost/math/distributions/normal.hpp>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -618,6 +619,28 @@ TEST(Calibrate, TheStandardLabEndToEnd) {
   EXPECT_LT(refit.nees_mean, 3.76);
   ASSERT_EQ(refit.nees_by_kind.size(), 1u);
   EXPECT_DOUBLE_EQ(refit.nees_by_kind[0].second, refit.nees_mean);
+  // Predicted with what the training runs leave unknown (the posterior predictive). The world has
+  // no groups, so no run is conditioned on another and the plug-in marginal NEES is compare's.
+  // Every effect of the world is sized by the training kinds, so the posterior predictive, with
+  // what they sized and with the priors of what they did not besides, stays within the same
+  // bounds. The training has no arcs, so it cannot size a wheelbase that differs on arcs; that
+  // is said.
+  ASSERT_TRUE(c.holdout->predictive);
+  const HoldoutSummary::Predictive& pred = *c.holdout->predictive;
+  EXPECT_NEAR(pred.plugin_nees_mean, c.holdout->summary.nees_mean, 1e-9 * c.holdout->summary.nees_mean);
+  for (const double nees : {pred.sized_nees_mean, pred.nees_mean}) {
+    EXPECT_GT(nees, 2.32);
+    EXPECT_LT(nees, 3.76);
+  }
+  ASSERT_EQ(pred.sized_by_kind.size(), 1u);
+  EXPECT_DOUBLE_EQ(pred.sized_by_kind[0].second, pred.sized_nees_mean);
+  const auto arc = std::find_if(pred.parameters.begin(), pred.parameters.end(),
+                                [](const auto& q) { return q.name == "turn_dependent_wheelbase.Eb_arc"; });
+  ASSERT_NE(arc, pred.parameters.end());
+  EXPECT_FALSE(arc->sized);
+  for (const auto& q : pred.parameters) EXPECT_GE(q.spread, kPredictiveSpreadShown) << q.name;
+  std::printf("arcs held out: marginal NEES %.3f, with the training uncertainty %.3f, with the priors %.3f\n",
+              pred.plugin_nees_mean, pred.sized_nees_mean, pred.nees_mean);
   // The training runs by kind: every training kind once, in order of first appearance, and
   // their run-weighted mean is the whole NEES mean.
   std::vector<std::string> kinds;
@@ -710,6 +733,107 @@ TEST(Calibrate, ANestedEffectIsSimplifiedAfterTheRounds) {
   // The standard lab's plain wheelbase, adopted as such: nothing to simplify.
   const Suite standard = test::synth_suite(load_world(kStandard), "nested_none");
   EXPECT_TRUE(calibrate(standard, suite_model(standard), options).simplified.empty());
+}
+
+/// The training runs of a lab whose external reference tracks a point off the axle centre: every
+/// path ends facing where it started (full spins, a line there and back, UMBmark squares, full
+/// circles), so the offset never shows and the runs cannot size it. `world_effects` is the
+/// world's effect block.
+std::string facing_start_world(const std::string& world_effects, const std::string& experiments, std::uint64_t seed) {
+  return "name: facing_start\n"
+         "robot: {wheelbase: 0.3, k_left: 1.0e-3, k_right: 1.0e-3}\n"
+         "world:\n  effects: " + world_effects + "\n"
+         "measurement_noise: {xy: 0.001, theta_deg: 0.1}\n"
+         "seed: " + std::to_string(seed) + "\n"
+         "experiments:\n" + experiments;
+}
+
+TEST(Design, APredictionCarriesWhatItsTrainingCouldNotSize) {
+  // The predictive check judged the way a prediction is: over worlds drawn from its prior. Each
+  // of M worlds has a reference offset (dx, dy) from the catalogue's prior N(0, 10 mm) (a
+  // stratified draw: normal quantiles at (m + 1/2) / M, dy's in another order) and its own
+  // training runs and held-out run. The model is the truth without the offset; the training
+  // runs all end facing their start, so they cannot size it. The held-out run is a half turn on
+  // the spot, where the offset shows twice over. One run per world counts, so the M NEES values
+  // are independent and, if the posterior predictive is right, each is chi^2_3: their mean lies
+  // within the chi^2_3M / M bounds at two-sided alpha = 0.01. The plug-in prediction, and the
+  // one with only what the training runs sized, lie far above them.
+  const std::string training_experiments =
+      "  - name: spin-ccw\n    runs: 10\n    path: {sample_rate: 50, speed: 0.3, segments: [{turn_deg: 360}]}\n"
+      "  - name: spin-cw\n    runs: 10\n    path: {sample_rate: 50, speed: 0.3, segments: [{turn_deg: -360}]}\n"
+      "  - name: there-and-back\n    runs: 10\n    path: {sample_rate: 50, speed: 0.3, segments: [{line: 2}, {line: -2}]}\n"
+      "  - name: circle\n    runs: 10\n    path: {sample_rate: 50, speed: 0.3, segments: [{arc: {radius: 1, angle_deg: 360}}]}\n"
+      "  - name: square-ccw\n    runs: 10\n    path: {sample_rate: 50, speed: 0.3, segments: [{line: 1}, {turn_deg: 90}, "
+      "{line: 1}, {turn_deg: 90}, {line: 1}, {turn_deg: 90}, {line: 1}, {turn_deg: 90}]}\n";
+  const double prior = 0.01;
+  constexpr int kWorlds = 200;
+  const boost::math::normal standard;
+  double plugin = 0.0, sized = 0.0, predictive = 0.0;
+  for (int m = 0; m < kWorlds; ++m) {
+    const double x = prior * boost::math::quantile(standard, (m + 0.5) / kWorlds);
+    const double y = prior * boost::math::quantile(standard, ((m * 77) % kWorlds + 0.5) / kWorlds);
+    const std::string effects = "[{reference_offset: {dx: " + format_number(x, "%.17g") + ", dy: " + format_number(y, "%.17g") + "}}]";
+    const std::string tag = "fs_" + std::to_string(m);
+    const Suite training = test::synth_suite(
+        test::world_from_text(facing_start_world(effects, training_experiments, 5000 + m), tag + "t"), tag + "t");
+    SuiteModel model = suite_model(training);
+    model.effects.clear();  // the truth without the offset
+    const TrainingUncertainty u = training_uncertainty(training, model, {});
+    if (m == 0) {
+      const auto dx = std::find(u.names.begin(), u.names.end(), "reference_offset.dx") - u.names.begin();
+      ASSERT_LT(static_cast<std::size_t>(dx), u.names.size());
+      EXPECT_EQ(u.prior_sd[static_cast<std::size_t>(dx)], prior);
+      EXPECT_GT(std::sqrt(u.covariance(dx, dx)), 0.9 * prior);  // not sized by the training runs
+      EXPECT_FALSE(u.sized[static_cast<std::size_t>(dx)]);
+      EXPECT_EQ(u.covariance_sized(dx, dx), 0.0);
+    }
+    Suite held = test::synth_suite(test::world_from_text(facing_start_world(effects,
+        "  - name: half-turn\n    runs: 2\n    path: {sample_rate: 50, speed: 0.3, segments: [{turn_deg: 180}]}\n", 4200 + m), tag), tag);
+    held.experiments[0].runs.resize(1);  // a world's runs share its offset: one counts
+    const PredictiveCheck c = predictive_check(held, u);
+    plugin += c.plugin_mean / kWorlds;
+    sized += c.sized_mean / kWorlds;
+    predictive += c.predictive_mean / kWorlds;
+  }
+  const boost::math::chi_squared chi2(3.0 * kWorlds);
+  const double lo = boost::math::quantile(chi2, 0.005) / kWorlds, hi = boost::math::quantile(chi2, 0.995) / kWorlds;
+  EXPECT_GT(predictive, lo);
+  EXPECT_LT(predictive, hi);
+  EXPECT_GT(plugin, hi);
+  EXPECT_GT(sized, hi);  // the training runs alone cannot know the offset
+  std::printf("half turns held out, %d worlds: NEES mean with the priors %.3f (bounds %.3f-%.3f), with the training "
+              "uncertainty %.3f, plug-in %.3f\n", kWorlds, predictive, lo, hi, sized, plugin);
+}
+
+TEST(Design, ThePosteriorMeanOfAnAbsentEffectIsWhereAFitPutsIt) {
+  // The training posterior's mean is one Newton step from the model. For an effect the model
+  // lacks and the runs size well (standard.yaml's lab with a scale error of 0.3% besides; the
+  // model is the rest of the truth), it must land where fit puts the parameter. The step also
+  // moves the other absent effects (the fit holds them at neutral, where the world has them), so
+  // the two differ by the estimate's sampling error given the others against without them: for
+  // Gaussian estimates the variance of that difference is sd^2 - se^2 (Hausman), the step's
+  // posterior sd and the fit's standard error; within 3 of its standard deviations. The prior
+  // (sd 0.005) shrinks the step by about (sd / 0.005)^2 = 2e-4 of its size, and the likelihood
+  // is nearly quadratic in Es over 0.3%. Both recover the world's Es within 3 of their own
+  // standard errors.
+  WorldFile w = load_world(kStandard);
+  w.world.effects.push_back({"scale_error", {1.003}});
+  const Suite lab = test::synth_suite(w, "posterior_mean");
+  SuiteModel model = suite_model(lab);
+  model.effects = load_world(kStandard).world.effects;  // the truth without the scale error
+  const TrainingUncertainty u = training_uncertainty(lab, model, {});
+  const auto es = std::find(u.names.begin(), u.names.end(), "scale_error.Es") - u.names.begin();
+  ASSERT_LT(static_cast<std::size_t>(es), u.names.size());
+  SuiteModel with = model;
+  with.effects.push_back({"scale_error", {1.0}});
+  const FitResult f = fit(lab, with, {"scale_error.Es"});
+  const double se = f.stderrs(0), sd = std::sqrt(u.covariance(es, es));
+  EXPECT_NEAR(1.0 + u.shift(es), f.values(0), 3 * std::sqrt(std::max(sd * sd - se * se, 0.0)));
+  EXPECT_NEAR(1.0 + u.shift(es), 1.003, 3 * sd);
+  EXPECT_NEAR(f.values(0), 1.003, 3 * se);
+  EXPECT_TRUE(u.sized[static_cast<std::size_t>(es)]);
+  std::printf("Es: fit %.6f +/- %.2g, posterior mean %.6f (sd %.2g)\n", f.values(0), se, 1.0 + u.shift(es),
+              std::sqrt(u.covariance(es, es)));
 }
 
 TEST(Design, TheRecommendedExperimentReducesTheWorstStandardErrorMost) {

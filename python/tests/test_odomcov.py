@@ -147,6 +147,10 @@ def test_calibrate_gives_calibrate_json():
     # the model's effects refitted on the held-out runs: none to refit when nothing was named
     assert "refitted" in held["holdout"]
     assert (held["holdout"]["refitted"] is None) == (held["named"] == [])
+    # ... and predicted from the training runs' posterior: three NEES means per run, one kind
+    pred = held["holdout"]["predictive"]
+    assert all(pred[k] > 0 for k in ("plugin_nees_mean", "sized_nees_mean", "nees_mean"))
+    assert len(pred["sized_by_kind"]) == 1
     with pytest.raises(ValueError):
         odomcov.calibrate(suite, rounds=0)
     with pytest.raises(ValueError):

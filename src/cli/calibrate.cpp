@@ -147,6 +147,26 @@ void write_verdict(std::ostream& out, const CalibrateResult& c, double alpha) {
   }
 }
 
+void write_predictive(std::ostream& out, const HoldoutSummary::Predictive& p) {
+  out << "  each run's marginal NEES (no run conditioned on another): " << fixed(p.plugin_nees_mean, 3)
+      << " as the model predicts it; " << fixed(p.sized_nees_mean, 3)
+      << " from the training runs' posterior of its parameters and of every absent catalogue effect they size; "
+      << fixed(p.nees_mean, 3) << " with those they do not size at their typical sizes besides (a prior, not data)\n";
+  write_by_kind(out, p.sized_by_kind, "    from the training posterior: ");
+  if (p.parameters.empty()) {
+    out << "    no one parameter's exact value would narrow it by " << kPredictiveSpreadShown
+        << " NEES: what the training leaves open is in combinations of parameters, each of which the others could "
+           "take up\n";
+  }
+  for (const auto& q : p.parameters) {
+    out << "    " << q.name << ": the training runs put it " << sci(q.shift, 2) << " from the model's value, sd "
+        << sci(q.posterior_sd, 2)
+        << (q.prior_sd > 0 ? " of prior " + sci(q.prior_sd, 2) + (q.sized ? "" : " (the training runs do not size it)")
+                           : std::string(" (fitted)"))
+        << "; knowing it would narrow the prediction of these runs by " << fixed(q.spread, 2) << " NEES\n";
+  }
+}
+
 void write_holdout(std::ostream& out, const HoldoutSummary& h) {
   out << "\nHeld-out runs (never seen by the loop): NEES mean " << fixed(h.summary.nees_mean, 3) << ", "
       << h.consistent << " of " << h.experiments << " experiments consistent, " << h.summary.verdict << "\n";
@@ -159,6 +179,7 @@ void write_holdout(std::ostream& out, const HoldoutSummary& h) {
     write_by_kind(out, h.refitted->nees_by_kind, "    ");
     for (const std::string& p : h.refitted->fit.at_bound) out << "    " << p << " ends at a bound of its range there\n";
   }
+  if (h.predictive) write_predictive(out, *h.predictive);
   if (h.extrapolation.empty()) {
     out << "  every held-out experiment lies inside the training domain\n";
     return;

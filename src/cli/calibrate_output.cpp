@@ -254,10 +254,24 @@ json holdout_json(const HoldoutSummary& h) {
     refitted["nees_mean"] = h.refitted->nees_mean;
     refitted["by_kind"] = by_kind_json(h.refitted->nees_by_kind);
   }
+  json predictive = nullptr;
+  if (h.predictive) {
+    const HoldoutSummary::Predictive& p = *h.predictive;
+    json parameters = json::array();
+    for (const auto& q : p.parameters) {
+      parameters.push_back({{"name", q.name}, {"prior_sd", q.prior_sd > 0 ? json(q.prior_sd) : json(nullptr)},
+                            {"posterior_sd", q.posterior_sd}, {"shift", q.shift}, {"sized", q.sized},
+                            {"spread", q.spread}});
+    }
+    predictive = {{"plugin_nees_mean", p.plugin_nees_mean}, {"plugin_by_kind", by_kind_json(p.plugin_by_kind)},
+                  {"sized_nees_mean", p.sized_nees_mean}, {"sized_by_kind", by_kind_json(p.sized_by_kind)},
+                  {"nees_mean", p.nees_mean}, {"by_kind", by_kind_json(p.nees_by_kind)},
+                  {"parameters", parameters}};
+  }
   return {{"nees_mean", h.summary.nees_mean}, {"verdict", h.summary.verdict},
           {"log_likelihood", h.summary.log_likelihood}, {"experiments", h.experiments},
           {"consistent_experiments", h.consistent}, {"by_kind", by_kind_json(h.nees_by_kind)},
-          {"extrapolation", h.extrapolation}, {"refitted", refitted}};
+          {"extrapolation", h.extrapolation}, {"refitted", refitted}, {"predictive", predictive}};
 }
 
 json diff_drive_json(const DiffDriveParameters& p) {

@@ -372,19 +372,26 @@ std::vector<std::string> joint_parameters(const SuiteModel& model, bool noise_le
   return names;
 }
 
-NeesByKind nees_by_kind(const Suite& suite, const Comparison& comparison) {
+NeesByKind nees_by_kind(const Suite& suite, const std::vector<double>& nees_mean) {
   std::vector<std::string> kinds;
   std::map<std::string, std::pair<double, double>> nees;  // kind -> (sum of NEES, runs)
-  for (std::size_t e = 0; e < suite.experiments.size() && e < comparison.experiments.size(); ++e) {
-    const ExperimentComparison& c = comparison.experiments[e];
+  for (std::size_t e = 0; e < suite.experiments.size() && e < nees_mean.size(); ++e) {
+    const auto n = static_cast<double>(suite.experiments[e].runs.size());
+    if (n == 0) continue;
     const std::string kind = experiment_kind(suite.experiments[e]);
     if (!nees.count(kind)) kinds.push_back(kind);
-    nees[kind].first += c.nees_mean * static_cast<double>(c.n);
-    nees[kind].second += static_cast<double>(c.n);
+    nees[kind].first += nees_mean[e] * n;
+    nees[kind].second += n;
   }
   NeesByKind out;
   for (const std::string& k : kinds) out.push_back({k, nees[k].first / nees[k].second});
   return out;
+}
+
+NeesByKind nees_by_kind(const Suite& suite, const Comparison& comparison) {
+  std::vector<double> nees_mean;
+  for (const ExperimentComparison& c : comparison.experiments) nees_mean.push_back(c.nees_mean);
+  return nees_by_kind(suite, nees_mean);
 }
 
 namespace {
@@ -403,6 +410,29 @@ std::optional<HoldoutSummary::Refitted> refit_on_holdout(const Suite& holdout, c
   const Comparison c = compare(holdout, out.fit.model, options.diagnose.alpha, cache.at(out.fit.model), gaussian);
   out.nees_mean = summarise(c).nees_mean;
   out.nees_by_kind = nees_by_kind(holdout, c);
+  return out;
+}
+
+/// HoldoutSummary::predictive: the held-out runs predicted from the training runs' posterior of
+/// the joint fit's parameters and of every absent systematic catalogue effect's.
+HoldoutSummary::Predictive predict_holdout(const Suite& training, const Suite& holdout, const SuiteModel& model,
+                                           bool noise_level) {
+  const TrainingUncertainty u = training_uncertainty(training, model, joint_parameters(model, noise_level));
+  const PredictiveCheck check = predictive_check(holdout, u);
+  HoldoutSummary::Predictive out;
+  out.plugin_nees_mean = check.plugin_mean;
+  out.sized_nees_mean = check.sized_mean;
+  out.nees_mean = check.predictive_mean;
+  out.plugin_by_kind = nees_by_kind(holdout, check.plugin);
+  out.sized_by_kind = nees_by_kind(holdout, check.sized);
+  out.nees_by_kind = nees_by_kind(holdout, check.predictive);
+  for (std::size_t k = 0; k < u.names.size(); ++k) {
+    if (check.spread[k] < kPredictiveSpreadShown) continue;
+    out.parameters.push_back({u.names[k], u.prior_sd[k], check.posterior_sd[k], u.shift(static_cast<Eigen::Index>(k)),
+                              u.sized[k], check.spread[k]});
+  }
+  std::stable_sort(out.parameters.begin(), out.parameters.end(),
+                   [](const auto& a, const auto& b) { return a.spread > b.spread; });
   return out;
 }
 
@@ -441,6 +471,7 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
     judged.measurement_noise = holdout->measurement_noise;
     out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha, options.diagnose.calibration);
     out.holdout->refitted = refit_on_holdout(*holdout, judged, named_noise_level(out.named), options, progress);
+    out.holdout->predictive = predict_holdout(suite, *holdout, out.model, named_noise_level(out.named));
   }
   // An interrupt during the steps after the rounds: nothing is returned, so nothing is written.
   if (progress && progress->cancel.load()) throw Cancelled();

@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <set>
@@ -86,10 +87,12 @@ Stacked stack(const std::vector<const RunResidual*>& runs) {
 
 /// The Gaussian Fisher information of a stacked set of runs with covariance C = S + U U^T (the
 /// U term only when `grouped`), from the sets at v + h and v - h per parameter:
-///   I_kl = dr_k' C^-1 dr_l + tr(C^-1 dC_k C^-1 dC_l) / 2.
+///   I_kl = dr_k' C^-1 dr_l + tr(C^-1 dC_k C^-1 dC_l) / 2;
+/// and, when `score` is given, adds the log-likelihood's gradient to it:
+///   g_k = -dr_k' C^-1 r + (r' C^-1 dC_k C^-1 r - tr(C^-1 dC_k)) / 2.
 Eigen::MatrixXd information_of(const Stacked& at, const std::vector<Stacked>& plus,
                                const std::vector<Stacked>& minus, const std::vector<double>& width,
-                               bool grouped) {
+                               bool grouped, Eigen::VectorXd* score = nullptr) {
   const std::size_t n = plus.size();
   auto cov = [grouped](const Stacked& s) -> Eigen::MatrixXd {
     return grouped ? Eigen::MatrixXd(s.S + s.U * s.U.transpose()) : s.S;
@@ -100,6 +103,13 @@ Eigen::MatrixXd information_of(const Stacked& at, const std::vector<Stacked>& pl
   for (std::size_t k = 0; k < n; ++k) {
     dr[k] = (plus[k].r - minus[k].r) / width[k];
     CdC[k] = C.solve((cov(plus[k]) - cov(minus[k])) / width[k]);
+  }
+  if (score) {
+    const Eigen::VectorXd Cr = C.solve(at.r);
+    for (std::size_t k = 0; k < n; ++k) {
+      const Eigen::VectorXd CdCCr = CdC[k] * Cr;
+      (*score)(static_cast<Eigen::Index>(k)) += -dr[k].dot(Cr) + 0.5 * (at.r.dot(CdCCr) - CdC[k].trace());
+    }
   }
   Eigen::MatrixXd I(n, n);
   for (std::size_t k = 0; k < n; ++k) {
@@ -132,7 +142,7 @@ bool has_group_columns(const Residuals& res) {
 
 /// The information of one set of runs (a group, or a single run) from the sensitivities.
 Eigen::MatrixXd information_of_runs(const Sensitivities& s, const std::vector<std::pair<std::size_t, std::size_t>>& runs,
-                                    bool grouped) {
+                                    bool grouped, Eigen::VectorXd* score = nullptr) {
   auto pick = [&](const Residuals& res) {
     std::vector<const RunResidual*> out;
     for (const auto& [e, r] : runs) out.push_back(&res[e][r]);
@@ -145,21 +155,23 @@ Eigen::MatrixXd information_of_runs(const Sensitivities& s, const std::vector<st
     minus.push_back(pick(s.minus[k]));
     width.push_back(s.steps[k].central ? 2 * s.steps[k].h : s.steps[k].h);
   }
-  return information_of(pick(s.at), plus, minus, width, grouped);
+  return information_of(pick(s.at), plus, minus, width, grouped, score);
 }
 
 /// The information of the runs of a suite from their sensitivities: each group's runs jointly
-/// when the model correlates them, each run alone otherwise.
-Eigen::MatrixXd information(const Sensitivities& s) {
+/// when the model correlates them, each run alone otherwise; and their log-likelihood's gradient
+/// into `score` when given.
+Eigen::MatrixXd information(const Sensitivities& s, Eigen::VectorXd* score = nullptr) {
   const auto n = static_cast<Eigen::Index>(s.plus.size());
   Eigen::MatrixXd I = Eigen::MatrixXd::Zero(n, n);
+  if (score) *score = Eigen::VectorXd::Zero(n);
   const bool grouped = has_group_columns(s.at);
   for (const auto& [group, runs] : runs_by_group(s.at)) {
     if (grouped) {
-      I += information_of_runs(s, runs, true);
+      I += information_of_runs(s, runs, true, score);
       continue;
     }
-    for (const auto& run : runs) I += information_of_runs(s, {run}, false);
+    for (const auto& run : runs) I += information_of_runs(s, {run}, false, score);
   }
   return I;
 }
@@ -354,6 +366,145 @@ std::vector<MenuExperiment> experiment_menu(const Suite& suite) {
 Eigen::MatrixXd fisher_information(const Suite& suite, const SuiteModel& model,
                                    const std::vector<std::string>& names) {
   return information(sensitivities(suite, model, names));
+}
+
+namespace {
+
+/// True when an effect of `list` contains `name` (EffectInfo::contains): its parameters already
+/// span what `name` would add (turn_dependent_wheelbase with Eb_arc = Eb_spin = Eb).
+bool contained(const EffectList& list, const std::string& name) {
+  return std::any_of(list.begin(), list.end(), [&](const EffectSpec& e) {
+    const EffectInfo* info = find_effect(e.name, list);
+    return info && std::find(info->contains.begin(), info->contains.end(), name) != info->contains.end();
+  });
+}
+
+}  // namespace
+
+TrainingUncertainty training_uncertainty(const Suite& training, const SuiteModel& model,
+                                         const std::vector<std::string>& fitted) {
+  TrainingUncertainty u{model, fitted, std::vector<double>(fitted.size(), 0.0), {}, {}, {}, {}, {}};
+  for (const EffectInfo& info : effect_catalogue()) {
+    if (!info.systematic || info.grouped || find_spec(u.model.effects, info.name) ||
+        u.model.effects.size() >= kMaxEffects || contained(u.model.effects, info.name)) {
+      continue;
+    }
+    EffectSpec absent{info.name, {}};
+    for (const EffectParameterInfo& p : info.parameters) absent.values.push_back(p.neutral);
+    EffectList with = u.model.effects;
+    with.push_back(absent);
+    try {
+      check_effects(with);
+    } catch (const EffectError&) {
+      continue;  // an effect the model's list does not admit beside its own
+    }
+    u.model.effects = std::move(with);
+    for (const EffectParameterInfo& p : info.parameters) {
+      u.names.push_back(info.name + "." + p.name);
+      u.prior_sd.push_back(std::abs(p.typical - p.neutral));
+    }
+  }
+  Eigen::VectorXd score;
+  Eigen::MatrixXd I = information(sensitivities(training, u.model, u.names), &score);
+  for (std::size_t k = 0; k < u.names.size(); ++k) {
+    const auto i = static_cast<Eigen::Index>(k);
+    if (u.prior_sd[k] > 0) I(i, i) += 1.0 / (u.prior_sd[k] * u.prior_sd[k]);
+  }
+  // A relative ridge of 1e-9, as for the estimates' covariance: a fitted parameter the training
+  // runs do not determine at all stays finite.
+  const Eigen::MatrixXd ridge = (1e-9 * I.diagonal().cwiseMax(1e-300)).asDiagonal();
+  u.covariance = (I + ridge).ldlt().solve(Eigen::MatrixXd::Identity(I.rows(), I.cols()));
+  // Given the unsized parameters at neutral: the inverse of the information's block of the sized
+  // ones (the conditional covariance of a Gaussian), zero elsewhere.
+  std::vector<Eigen::Index> kept;
+  for (std::size_t k = 0; k < u.names.size(); ++k) {
+    const auto i = static_cast<Eigen::Index>(k);
+    u.sized.push_back(u.prior_sd[k] == 0 || std::sqrt(u.covariance(i, i)) <= kSizedPosteriorRatio * u.prior_sd[k]);
+    if (u.sized.back()) kept.push_back(i);
+  }
+  const Eigen::MatrixXd block = (I + ridge)(kept, kept);
+  const Eigen::MatrixXd inverse = block.ldlt().solve(Eigen::MatrixXd::Identity(block.rows(), block.cols()));
+  u.covariance_sized = Eigen::MatrixXd::Zero(I.rows(), I.cols());
+  u.covariance_sized(kept, kept) = inverse;
+  // The posterior means: one Newton step of the log-posterior from the model (the priors' means
+  // are where it starts, so their gradient is 0 there).
+  u.shift = u.covariance * score;
+  u.shift_sized = Eigen::VectorXd::Zero(score.size());
+  u.shift_sized(kept) = inverse * score(kept);
+  return u;
+}
+
+namespace {
+
+using MeanJacobian = Eigen::Matrix<double, 3, Eigen::Dynamic>;
+
+/// The derivative of the predicted mean of run r of experiment e in the parameters.
+MeanJacobian mean_jacobian(const Sensitivities& s, std::size_t e, std::size_t r) {
+  MeanJacobian J(3, static_cast<Eigen::Index>(s.steps.size()));
+  for (std::size_t k = 0; k < s.steps.size(); ++k) {
+    const double width = s.steps[k].central ? 2 * s.steps[k].h : s.steps[k].h;
+    J.col(static_cast<Eigen::Index>(k)) = (s.plus[k][e][r].mean - s.minus[k][e][r].mean) / width;
+  }
+  return J;
+}
+
+/// One run's NEES as the model predicts it, from the sized posterior and from the whole one (in
+/// that order); adds to `spread` what knowing each parameter would take off its prediction,
+/// v' C^-1 v / Sigma_kk with v = J Sigma e_k (the part of the widening that k's estimate carries,
+/// with its correlations to the others).
+std::array<double, 3> run_nees(const RunResidual& run, const MeanJacobian& J, const TrainingUncertainty& u,
+                               std::vector<double>& spread) {
+  const Matrix3 C = run.cov + run.group_column * run.group_column.transpose() +
+                    run.group_column2 * run.group_column2.transpose();
+  const Vector3 residual = run.error - run.mean;
+  const Eigen::LDLT<Matrix3> own(C);
+  auto nees = [&](const Eigen::MatrixXd& sigma, const Eigen::VectorXd& shift) {
+    const Vector3 r = residual - J * shift;
+    return r.dot(Matrix3(C + J * sigma * J.transpose()).ldlt().solve(r));
+  };
+  const MeanJacobian JS = J * u.covariance;
+  for (std::size_t k = 0; k < spread.size(); ++k) {
+    const auto i = static_cast<Eigen::Index>(k);
+    const Vector3 v = JS.col(i);
+    if (u.covariance(i, i) > 0) spread[k] += v.dot(own.solve(v)) / u.covariance(i, i);
+  }
+  return {residual.dot(own.solve(residual)), nees(u.covariance_sized, u.shift_sized), nees(u.covariance, u.shift)};
+}
+
+}  // namespace
+
+PredictiveCheck predictive_check(const Suite& runs, const TrainingUncertainty& uncertainty) {
+  SuiteModel model = uncertainty.model;
+  model.measurement_noise = runs.measurement_noise;
+  const Sensitivities s = sensitivities(runs, model, uncertainty.names);
+  const std::size_t p = uncertainty.names.size();
+  PredictiveCheck out;
+  for (std::size_t k = 0; k < p; ++k) {
+    out.posterior_sd.push_back(std::sqrt(uncertainty.covariance(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k))));
+  }
+  out.spread.assign(p, 0.0);
+  std::array<double, 3> total{};
+  double count = 0.0;
+  for (std::size_t e = 0; e < s.at.size(); ++e) {
+    std::array<double, 3> sum{};
+    for (std::size_t r = 0; r < s.at[e].size(); ++r) {
+      const std::array<double, 3> nees = run_nees(s.at[e][r], mean_jacobian(s, e, r), uncertainty, out.spread);
+      for (std::size_t i = 0; i < 3; ++i) sum[i] += nees[i];
+    }
+    const double n = std::max<double>(1.0, static_cast<double>(s.at[e].size()));
+    out.plugin.push_back(sum[0] / n);
+    out.sized.push_back(sum[1] / n);
+    out.predictive.push_back(sum[2] / n);
+    for (std::size_t i = 0; i < 3; ++i) total[i] += sum[i];
+    count += static_cast<double>(s.at[e].size());
+  }
+  if (count > 0) {
+    out.plugin_mean = total[0] / count;
+    out.sized_mean = total[1] / count;
+    out.predictive_mean = total[2] / count;
+    for (double& x : out.spread) x /= count;
+  }
+  return out;
 }
 
 std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit) {

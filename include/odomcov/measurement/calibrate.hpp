@@ -29,6 +29,8 @@ struct CalibrateOptions {
 /// appearance: of `comparison`, which is of `suite`'s experiments.
 using NeesByKind = std::vector<std::pair<std::string, double>>;
 NeesByKind nees_by_kind(const Suite& suite, const Comparison& comparison);
+/// The same from each experiment's NEES mean per run (one per experiment of `suite`).
+NeesByKind nees_by_kind(const Suite& suite, const std::vector<double>& nees_mean);
 
 /// A model judged on runs it was not fitted on.
 struct HoldoutSummary {
@@ -50,7 +52,32 @@ struct HoldoutSummary {
     NeesByKind nees_by_kind;
   };
   std::optional<Refitted> refitted;
+  /// The held-out runs predicted from the training runs' posterior (predictive_check,
+  /// design.hpp): their marginal NEES mean as the model predicts them, from the posterior of what
+  /// the training runs size, and with every absent effect they do not size at its prior besides;
+  /// and the parameters that matter for these runs.
+  struct Predictive {
+    double plugin_nees_mean = 0.0, sized_nees_mean = 0.0, nees_mean = 0.0;
+    NeesByKind plugin_by_kind, sized_by_kind, nees_by_kind;
+    struct Parameter {
+      std::string name;
+      double prior_sd = 0.0;  // 0: a fitted parameter (no prior)
+      double posterior_sd = 0.0;
+      double shift = 0.0;     // the posterior mean less the model's value (TrainingUncertainty::shift)
+      bool sized = true;      // TrainingUncertainty::sized
+      double spread = 0.0;    // PredictiveCheck::spread
+    };
+    /// Every parameter whose exact value would narrow the held-out prediction by at least
+    /// kPredictiveSpreadShown NEES (PredictiveCheck::spread), most first.
+    std::vector<Parameter> parameters;
+  };
+  std::optional<Predictive> predictive;
 };
+
+/// HoldoutSummary::Predictive lists the parameters whose exact value would narrow the held-out
+/// prediction by at least this much (in NEES, whose plug-in expectation is 3): a tenth of one
+/// component's share.
+inline constexpr double kPredictiveSpreadShown = 0.1;
 
 /// The calibrated model as ROS 2's diff_drive_controller takes it (docs/calibrate.md):
 ///  * wheel_separation_multiplier: the corrected odometry's effective wheelbase over the nominal

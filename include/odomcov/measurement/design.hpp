@@ -74,6 +74,63 @@ struct NextExperiment {
 Eigen::MatrixXd fisher_information(const Suite& suite, const SuiteModel& model,
                                    const std::vector<std::string>& names);
 
+/// An absent effect's parameter counts as sized by the training runs when its posterior standard
+/// deviation is at most this fraction of its prior's (the runs cut its variance at least
+/// fourfold); beyond it, what a prediction carries of the parameter is mostly the prior.
+inline constexpr double kSizedPosteriorRatio = 0.5;
+
+/// What the training runs leave unknown about the mean a model predicts: the posterior covariance
+/// of the model's fitted parameters and of the parameters of every systematic catalogue effect the
+/// model does not have (each at its neutral value, so the model's predictions do not change; not
+/// one that an effect of the model contains, whose parameters the model's span), from the
+/// training runs' Fisher information. The fitted parameters have no prior; an absent effect's
+/// parameter has a normal prior at its neutral value with its catalogue typical size as the
+/// standard deviation (EffectParameterInfo::typical - neutral: Es 0.005, a reference offset
+/// 10 mm, ...), so a parameter the training runs do not size keeps about its prior, and one they
+/// size gets their standard error:
+///   covariance = (I_train + diag(1 / prior_sd^2))^-1.
+/// `covariance_sized` is the same given that every unsized parameter is at its neutral value (the
+/// conditional covariance; their rows and columns zero): the uncertainty the training runs
+/// themselves leave, whatever the priors of what they could not see.
+struct TrainingUncertainty {
+  SuiteModel model;                // the model with every absent effect added at its neutral values
+  std::vector<std::string> names;  // the fitted parameters, then the absent effects'
+  std::vector<double> prior_sd;    // 0 for a fitted parameter (no prior)
+  std::vector<bool> sized;         // fitted, or posterior sd <= kSizedPosteriorRatio x prior sd
+  Eigen::MatrixXd covariance, covariance_sized;
+  /// The posterior means less the model's values (one Newton step of the log-posterior from the
+  /// model, covariance x the training log-likelihood's gradient there): where the training runs
+  /// put the parameters that the model fixed (an absent effect is at neutral in the model, not
+  /// in the runs). `shift_sized` with the unsized ones at neutral.
+  Eigen::VectorXd shift, shift_sized;
+};
+
+/// training_uncertainty of `fitted` (parameter names of `model`, e.g. the joint fit's) on the
+/// runs of `training`.
+TrainingUncertainty training_uncertainty(const Suite& training, const SuiteModel& model,
+                                         const std::vector<std::string>& fitted);
+
+/// A model's prediction of runs it was not fitted on, as it is and from the training runs'
+/// posterior: each run's NEES against its marginal predicted mean and covariance C (the run's
+/// own and its group's, no conditioning on other runs), and, to first order in the parameters,
+/// against the posterior predictive: mean + J shift, C + J Sigma J^T, J the derivative of the
+/// run's predicted mean in the parameters, (shift, Sigma) the training posterior's:
+/// (shift_sized, covariance_sized) for `sized`, (shift, covariance) for `predictive`. The first
+/// is the plug-in prediction; the others say what the training could not tell it, the last also
+/// what the priors say of what it could not see.
+struct PredictiveCheck {
+  std::vector<double> plugin, sized, predictive;  // per experiment, the mean NEES of its runs
+  double plugin_mean = 0.0, sized_mean = 0.0, predictive_mean = 0.0;  // per run, over every experiment
+  /// Per parameter of the TrainingUncertainty (same order): its posterior standard deviation, and
+  /// how much knowing it exactly would narrow the prediction of these runs (with `covariance`),
+  /// in units of NEES: the mean over the runs of v' C^-1 v / Sigma_kk, v = J Sigma e_k (the part
+  /// of the widening its estimate carries, with its correlations to the other parameters).
+  std::vector<double> posterior_sd, spread;
+};
+
+/// The check of `runs` (with its own measurement noise) against `uncertainty.model`.
+PredictiveCheck predictive_check(const Suite& runs, const TrainingUncertainty& uncertainty);
+
 /// The menu ranked by information_gain for the fit's parameters at its model (the current
 /// information: fisher_information of the suite), best first; experiments that add the same
 /// information as one ranked earlier (a speed the model does not depend on) are left out.
