@@ -1,10 +1,11 @@
 // odomcov sweep SWEEP.yaml [--out CSV] [--shard I/N] [--threads T] [--alpha A] [--order 1|2]
 //               [--json FILE]
 // One Monte-Carlo validation per grid point, one CSV row each (docs/formats.md, "Sweep file").
+#include <algorithm>
+#include <cctype>
 #include <csignal>
 #include <fstream>
 #include <iostream>
-#include <regex>
 
 #include "commands.hpp"
 #include "odomcov/base/error.hpp"
@@ -35,13 +36,22 @@ extern "C" void on_interrupt(int) {
   if (Progress* p = g_running.load()) p->cancel.store(true);
 }
 
+/// True when `text` is one or more decimal digits.
+bool all_digits(const std::string& text) {
+  return !text.empty() && std::all_of(text.begin(), text.end(), [](unsigned char c) { return std::isdigit(c) != 0; });
+}
+
 std::pair<std::size_t, std::size_t> parse_shard(const std::string& text) {
-  static const std::regex pattern(R"((\d+)/(\d+))");
-  std::smatch m;
-  if (!std::regex_match(text, m, pattern)) throw UsageError("--shard must be I/N, got " + one_line(text, 100));
+  // Read by hand, not by std::regex: its backtracking matcher recurses once per character and
+  // overflowed the stack on a --shard of 100 000 digits.
+  const std::size_t slash = text.find('/');
+  const std::string first = text.substr(0, slash), second = slash == std::string::npos ? "" : text.substr(slash + 1);
+  if (!all_digits(first) || !all_digits(second)) throw UsageError("--shard must be I/N, got " + one_line(text, 100));
   // At most 9 digits each: a longer count cannot be a real shard (and would overflow stoul).
-  if (m[1].length() > 9 || m[2].length() > 9) throw UsageError("--shard I/N: I and N must be below 1e9, got " + one_line(text, 100));
-  const std::size_t i = std::stoul(m[1]), n = std::stoul(m[2]);
+  if (first.size() > 9 || second.size() > 9) {
+    throw UsageError("--shard I/N: I and N must be below 1e9, got " + one_line(text, 100));
+  }
+  const std::size_t i = std::stoul(first), n = std::stoul(second);
   if (n < 1 || i < 1 || i > n) throw UsageError("--shard I/N needs 1 <= I <= N, got " + text);
   return {i, n};
 }
