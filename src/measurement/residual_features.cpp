@@ -21,8 +21,16 @@ constexpr int kDim = 3;
 /// The systematic directions a feature can modulate (directions() below): the three factor
 /// effects and a sideways slip.
 constexpr int kDirectionCount = 4;
-/// The mean part's base terms per experiment: a constant end-frame offset and the directions.
-constexpr int kBaseTerms = kDim + kDirectionCount;
+/// The start frame's two position axes: an offset fixed in each run's start frame.
+constexpr int kStartFrameTerms = 2;
+/// The mean part's base terms per experiment: a constant offset in the end frame and one in the
+/// start frame, and the directions.
+constexpr int kBaseTerms = kDim + kStartFrameTerms + kDirectionCount;
+/// The terms a feature modulates: a heading offset, an offset in the start frame and the
+/// directions; not the end frame's position offset, the constant a marker off the axle centre
+/// adds. Varying it too costs power: on the open batch 29012028 three of the four worlds whose
+/// scale fades lost distance as their first feature with it, one without it.
+constexpr int kModulatedTerms = 1 + kStartFrameTerms + kDirectionCount;
 /// A wheel's direction counts as reversed once it has moved this far back from its furthest
 /// point: encoder jitter of a tick or two on a standing wheel is not a reversal.
 constexpr double kReversalHysteresis_m = 0.005;
@@ -161,7 +169,11 @@ const std::vector<Feature>& features() {
        "an error that grows with the distance driven: a scale error (scale_error) or unequal "
        "wheel diameters (wheel_diameter_ratio) in the catalogue; when those are already in the "
        "model, a scale that changes along the run (wear, tyre heating), which is in no "
-       "catalogue: a custom effect such as scale: 1 + a*s would model it",
+       "catalogue: a custom effect such as scale: 1 + a*s would model it; or, where the runs "
+       "start facing the same way, a floor that pushes every run the same way (a slope): an "
+       "offset in the start frame that grows with the distance, in no catalogue; a custom "
+       "effect such as lateral: \"b*cos(theta) - a*sin(theta)\" with scale: "
+       "\"1 + a*cos(theta) + b*sin(theta)\" (theta the heading since the start) would model it",
        "a spread that grows with the distance driven faster than the model's: wheel radii that "
        "change from run to run (per_run_radius: variance as distance squared) or bumps; when the "
        "long runs alone are too noisy, a custom noise: \"1 + a*s\" would model it"},
@@ -239,6 +251,9 @@ struct ExperimentMean {
   Vector3 r = Vector3::Zero();
   // d r / d (Es, Eb, Ed, lateral slip), columns, end frame
   Eigen::Matrix<double, kDim, kDirectionCount> S = Eigen::Matrix<double, kDim, kDirectionCount>::Zero();
+  // the start frame's x and y axes in the end frame (the runs' mean): what a unit offset fixed in
+  // each run's start frame adds to r
+  Eigen::Matrix<double, kDim, kStartFrameTerms> V = Eigen::Matrix<double, kDim, kStartFrameTerms>::Zero();
   Matrix3 W = Matrix3::Zero();  // C^-1
   PathFeatures features;
   std::string group;
@@ -270,6 +285,10 @@ double gls_rss(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::M
   return rss;
 }
 
+/// Columns of a design whose unit-length parts are dependent to this relative precision count
+/// once (design_rank).
+constexpr double kRankTolerance = 1e-9;
+
 /// The F test's p-value and the alignment's fields, from the statistic and degrees of freedom.
 void f_result(double statistic, int dof1, int dof2, ResidualAlignment& out) {
   out.dof1 = dof1;
@@ -280,11 +299,31 @@ void f_result(double statistic, int dof1, int dof2, ResidualAlignment& out) {
   out.testable = true;
 }
 
-/// F test of the nested designs X1 (H1) against X0 (H0).
+/// The rank of the designs X_e stacked over the experiments and whitened (C_e^-1/2 X_e), each
+/// column scaled to unit length first: the number of terms the data can tell apart. (An offset
+/// fixed in the start frame is one fixed in the end frame for a path that ends facing the way it
+/// started; a suite of such paths alone cannot tell them apart.)
+int design_rank(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X) {
+  const Eigen::Index p = X.front().cols();
+  Eigen::MatrixXd A(kDim * static_cast<Eigen::Index>(ms.size()), p);
+  for (std::size_t e = 0; e < ms.size(); ++e) {
+    const Eigen::LLT<Matrix3> llt(ms[e].W);  // W = L L^T: L^T X_e is the whitened design
+    A.middleRows(kDim * static_cast<Eigen::Index>(e), kDim) = llt.matrixU() * X[e];
+  }
+  for (Eigen::Index j = 0; j < p; ++j) {
+    const double norm = A.col(j).norm();
+    if (norm > 0) A.col(j) /= norm;
+  }
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+  qr.setThreshold(kRankTolerance);
+  return static_cast<int>(qr.rank());
+}
+
+/// F test of the nested designs X1 (H1) against X0 (H0), the degrees of freedom their ranks.
 void f_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
             const std::vector<Eigen::MatrixXd>& X1, ResidualAlignment& out) {
   const int m = static_cast<int>(ms.size());
-  const int p1 = static_cast<int>(X1.front().cols()), p0 = static_cast<int>(X0.front().cols());
+  const int p1 = design_rank(ms, X1), p0 = design_rank(ms, X0);
   out.dof1 = p1 - p0;
   out.dof2 = kDim * m - p1;
   if (out.dof1 <= 0 || out.dof2 <= 0) return;
@@ -407,6 +446,7 @@ bool experiment_mean(const SuiteExperiment& ex, std::size_t e, const Residuals& 
     covs.push_back(R * res.cov * R.transpose());
     m.frames.push_back(R);
     m.r += runs.back() / n;
+    m.V += R.leftCols<kStartFrameTerms>() / n;
     for (int j = 0; j < kDirectionCount; ++j) {
       m.S.col(j) += R * ((*nudges[static_cast<std::size_t>(j)])[e][r].mean - res.mean) / (kSensitivityStep * n);
     }
@@ -464,21 +504,21 @@ std::vector<Eigen::VectorXd> feature_columns(const std::vector<const ExperimentM
   return out;
 }
 
-/// Mean part of a path feature: the base design X0 plus the same terms modulated by each of the
+/// Mean part of a path feature: the base design X0 plus the terms M modulated by each of the
 /// feature's columns; F test against X0, untestable when the feature does not vary.
 void mean_feature_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
-                       const Feature& f, ResidualAlignment& a) {
+                       const std::vector<Eigen::MatrixXd>& M, const Feature& f, ResidualAlignment& a) {
   std::vector<const ExperimentMean*> all;
   for (const ExperimentMean& m : ms) all.push_back(&m);
   const std::vector<Eigen::VectorXd> cols = feature_columns(all, f);
   if (cols.empty()) return;
   std::vector<Eigen::MatrixXd> X1;
   for (std::size_t e = 0; e < ms.size(); ++e) {
-    Eigen::MatrixXd x(kDim, X0[e].cols() * static_cast<Eigen::Index>(1 + cols.size()));
-    x.leftCols(X0[e].cols()) = X0[e];
+    const Eigen::Index p0 = X0[e].cols(), q = M[e].cols();
+    Eigen::MatrixXd x(kDim, p0 + q * static_cast<Eigen::Index>(cols.size()));
+    x.leftCols(p0) = X0[e];
     for (std::size_t c = 0; c < cols.size(); ++c) {
-      x.middleCols(X0[e].cols() * static_cast<Eigen::Index>(c + 1), X0[e].cols()) =
-          cols[c](static_cast<Eigen::Index>(e)) * X0[e];
+      x.middleCols(p0 + q * static_cast<Eigen::Index>(c), q) = cols[c](static_cast<Eigen::Index>(e)) * M[e];
     }
     X1.push_back(x);
   }
@@ -809,15 +849,20 @@ std::vector<ResidualAlignment> alignment(const Suite& suite, const SuiteModel& m
                                          const SimulatedDispersion* simulated) {
   std::vector<ExperimentMean> ms = experiment_means(suite, model, residuals, nudges);
   if (simulated) simulated_dispersions(suite, model, residuals, *simulated, ms);
-  // Mean part, H0: the misfit is a constant offset in the end frame plus constant factor errors
-  // and a constant sideways slip, r_e = [I3 S_e] c. H1 adds the same terms modulated by the
-  // feature, f_e [I3 S_e] d: a scale, wheelbase, diameter ratio or sideways slip (or an offset)
-  // that varies with the feature.
-  std::vector<Eigen::MatrixXd> X0;
+  // Mean part, H0: the misfit is a constant offset in the end frame and one in the start frame
+  // (a marker off the axle centre makes both: R(theta) d - d), plus constant factor errors and a
+  // constant sideways slip, r_e = [I3 V_e S_e] c. H1 adds the physical terms modulated by the
+  // feature, f_e [e_theta V_e S_e] d: a scale, wheelbase, diameter ratio or sideways slip, a
+  // heading offset, or an offset in the start frame, that varies with the feature (one that grows
+  // with the distance: a floor that pushes every run the same way, where runs start aligned).
+  std::vector<Eigen::MatrixXd> X0, M;
   for (const ExperimentMean& m : ms) {
     Eigen::MatrixXd x(kDim, kBaseTerms);
-    x << Matrix3::Identity(), m.S;
+    x << Matrix3::Identity(), m.V, m.S;
     X0.push_back(x);
+    Eigen::MatrixXd modulated(kDim, kModulatedTerms);
+    modulated << Vector3::UnitZ(), m.V, m.S;
+    M.push_back(modulated);
   }
   const bool run_part = std::any_of(ms.begin(), ms.end(), [](const ExperimentMean& m) { return m.headings_differ; });
   std::vector<ResidualAlignment> out;
@@ -840,7 +885,7 @@ std::vector<ResidualAlignment> alignment(const Suite& suite, const SuiteModel& m
       if (f.columns == 0) {
         mean_group_test(ms, X0, mean);
       } else {
-        mean_feature_test(ms, X0, f, mean);
+        mean_feature_test(ms, X0, M, f, mean);
       }
       scatter_feature_test(ms, f, scatter);
     }

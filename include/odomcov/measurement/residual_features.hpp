@@ -86,19 +86,25 @@ struct ResidualAlignment {
 /// Mean part. For experiment e with n runs, the mean residual r_e = mean_i (error_i - mean_i) is
 /// taken in each run's odometry end frame (along-track, cross-track, heading); its predicted
 /// covariance is C_e = sum_i Sigma_i / n^2 (rotated alike), so under the model r_e ~ N(0, C_e).
-/// S_e (3x3) is the first-order sensitivity of r_e to the three factor directions a feature can
-/// modulate (wheel scale Es, wheelbase Eb, diameter ratio Ed), by a forward difference of the
-/// model's prediction. With f_e the feature averaged over the experiment's runs, centred and
-/// scaled, the generalised least-squares fit
-///   H1: r_e = [I3 S_e] c + f_e [I3 S_e] d      (an offset or factor error varying with f)
-/// is set against H0: r_e = [I3 S_e] c (constant ones), and
-///   F = ((RSS0 - RSS1)/6) / (RSS1/(3m - 12)) ~ F(6, 3m - 12),
-/// with RSS the C_e^-1-weighted residual sums of squares over the m experiments. H0's constant
-/// terms and the estimated scale (RSS1) make the test about variation *with the feature*, not a
-/// misfit common to every experiment or an overall variance too small. heading has two columns
-/// (its cos and sin), each modulating the six terms: F(12, 3m - 18); it is untestable unless
-/// every run's start heading is known. group is the one-way ANOVA: H0's terms per group against
-/// common ones, F(6(G - 1), 3m - 6G).
+/// S_e (3x4) is the first-order sensitivity of r_e to the four directions a feature can modulate
+/// (wheel scale Es, wheelbase Eb, diameter ratio Ed, a sideways slip per metre), by a forward
+/// difference of the model's prediction; V_e (3x2) carries an offset fixed in each run's start
+/// frame (its x and y axes in the end frame), I3 one fixed in the end frame: a marker off the
+/// axle centre makes both (R(theta) d - d). With f_e the feature averaged over the experiment's
+/// runs, centred and scaled, the generalised least-squares fit
+///   H1: r_e = X_e c + f_e M_e d,   X_e = [I3 V_e S_e],   M_e = [e_theta V_e S_e]
+/// (a factor error, a sideways slip, a heading offset or an offset in the start frame that varies
+/// with f) is set against H0: r_e = X_e c (constant ones), and
+///   F = ((RSS0 - RSS1)/q) / (RSS1/(3m - p1)) ~ F(q, 3m - p1),   q = p1 - p0,
+/// with RSS the C_e^-1-weighted residual sums of squares over the m experiments and p0, p1 the
+/// ranks of the stacked designs (9 and 16 where the experiments end at different headings; an
+/// offset in the start frame is one in the end frame for a path that ends facing the way it
+/// started). H0's constant terms and the estimated scale (RSS1) make the test about variation
+/// *with the feature*, not a misfit common to every experiment or an overall variance too small.
+/// A floor that pushes every run the same way (runs started aligned) is an offset in the start
+/// frame that grows with the distance. heading has two columns (its cos and sin), each
+/// modulating the seven terms; it is untestable unless every run's start heading is known. group
+/// is the one-way ANOVA: H0's terms per group against common ones.
 ///
 /// Scatter part. For experiment e with n >= 2 runs, d_i = r_i - mean_j r_j (end frame) and
 ///   W_e = sum_i d_i' Sigma_i^-1 d_i,  E[W_e] = sum_i (3 (1 - 2/n) + tr(Sigma_i^-1 Sigma_bar)/n)
