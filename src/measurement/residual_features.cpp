@@ -319,15 +319,40 @@ int design_rank(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::
   return static_cast<int>(qr.rank());
 }
 
-/// F test of the nested designs X1 (H1) against X0 (H0), the degrees of freedom their ranks.
-void f_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
+/// The mean part's null design, shared by every feature's test: per experiment the base terms
+/// X0 = [I3 V S] and the terms a feature modulates M = [e_theta V S] (alignment() says why), and
+/// X0's rank and RSS, computed once.
+struct MeanDesign {
+  std::vector<Eigen::MatrixXd> base, modulated;
+  int base_rank = 0;
+  double base_rss = 0.0;
+};
+
+MeanDesign mean_design(const std::vector<ExperimentMean>& ms) {
+  MeanDesign d;
+  for (const ExperimentMean& m : ms) {
+    Eigen::MatrixXd x(kDim, kBaseTerms);
+    x << Matrix3::Identity(), m.V, m.S;
+    d.base.push_back(x);
+    Eigen::MatrixXd modulated(kDim, kModulatedTerms);
+    modulated << Vector3::UnitZ(), m.V, m.S;
+    d.modulated.push_back(modulated);
+  }
+  if (ms.empty()) return d;
+  d.base_rank = design_rank(ms, d.base);
+  d.base_rss = gls_rss(ms, d.base);
+  return d;
+}
+
+/// F test of the nested design X1 (H1) against the null (H0), the degrees of freedom their ranks.
+void f_test(const std::vector<ExperimentMean>& ms, const MeanDesign& null,
             const std::vector<Eigen::MatrixXd>& X1, ResidualAlignment& out) {
   const int m = static_cast<int>(ms.size());
-  const int p1 = design_rank(ms, X1), p0 = design_rank(ms, X0);
-  out.dof1 = p1 - p0;
+  const int p1 = design_rank(ms, X1);
+  out.dof1 = p1 - null.base_rank;
   out.dof2 = kDim * m - p1;
   if (out.dof1 <= 0 || out.dof2 <= 0) return;
-  const double rss0 = gls_rss(ms, X0), rss1 = gls_rss(ms, X1);
+  const double rss0 = null.base_rss, rss1 = gls_rss(ms, X1);
   if (!(rss1 > 0) || !std::isfinite(rss0)) return;
   f_result(std::max(0.0, (rss0 - rss1) / out.dof1) / (rss1 / out.dof2), out.dof1, out.dof2, out);
 }
@@ -506,8 +531,10 @@ std::vector<Eigen::VectorXd> feature_columns(const std::vector<const ExperimentM
 
 /// Mean part of a path feature: the base design X0 plus the terms M modulated by each of the
 /// feature's columns; F test against X0, untestable when the feature does not vary.
-void mean_feature_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
-                       const std::vector<Eigen::MatrixXd>& M, const Feature& f, ResidualAlignment& a) {
+void mean_feature_test(const std::vector<ExperimentMean>& ms, const MeanDesign& d, const Feature& f,
+                       ResidualAlignment& a) {
+  const std::vector<Eigen::MatrixXd>& X0 = d.base;
+  const std::vector<Eigen::MatrixXd>& M = d.modulated;
   std::vector<const ExperimentMean*> all;
   for (const ExperimentMean& m : ms) all.push_back(&m);
   const std::vector<Eigen::VectorXd> cols = feature_columns(all, f);
@@ -522,7 +549,7 @@ void mean_feature_test(const std::vector<ExperimentMean>& ms, const std::vector<
     }
     X1.push_back(x);
   }
-  f_test(ms, X0, X1, a);
+  f_test(ms, d, X1, a);
 }
 
 /// A feature's columns over an experiment's runs about their mean, those that vary scaled to at
@@ -618,8 +645,7 @@ std::vector<int> group_indices(const std::vector<const ExperimentMean*>& ms, int
 
 /// Mean part of the groups: one-way ANOVA, the base terms per group against common ones;
 /// untestable with fewer than two groups.
-void mean_group_test(const std::vector<ExperimentMean>& ms, const std::vector<Eigen::MatrixXd>& X0,
-                     ResidualAlignment& a) {
+void mean_group_test(const std::vector<ExperimentMean>& ms, const MeanDesign& d, ResidualAlignment& a) {
   std::vector<const ExperimentMean*> all;
   for (const ExperimentMean& m : ms) all.push_back(&m);
   int groups = 0;
@@ -628,10 +654,10 @@ void mean_group_test(const std::vector<ExperimentMean>& ms, const std::vector<Ei
   std::vector<Eigen::MatrixXd> X1;
   for (std::size_t e = 0; e < ms.size(); ++e) {
     Eigen::MatrixXd x = Eigen::MatrixXd::Zero(kDim, kBaseTerms * groups);
-    x.middleCols(kBaseTerms * g[e], kBaseTerms) = X0[e];
+    x.middleCols(kBaseTerms * g[e], kBaseTerms) = d.base[e];
     X1.push_back(x);
   }
-  f_test(ms, X0, X1, a);
+  f_test(ms, d, X1, a);
 }
 
 /// A gamma GLM with log link and known shapes k_e [McCullagh89, ch. 8], fitted by iteratively
@@ -855,15 +881,7 @@ std::vector<ResidualAlignment> alignment(const Suite& suite, const SuiteModel& m
   // feature, f_e [e_theta V_e S_e] d: a scale, wheelbase, diameter ratio or sideways slip, a
   // heading offset, or an offset in the start frame, that varies with the feature (one that grows
   // with the distance: a floor that pushes every run the same way, where runs start aligned).
-  std::vector<Eigen::MatrixXd> X0, M;
-  for (const ExperimentMean& m : ms) {
-    Eigen::MatrixXd x(kDim, kBaseTerms);
-    x << Matrix3::Identity(), m.V, m.S;
-    X0.push_back(x);
-    Eigen::MatrixXd modulated(kDim, kModulatedTerms);
-    modulated << Vector3::UnitZ(), m.V, m.S;
-    M.push_back(modulated);
-  }
+  const MeanDesign design = mean_design(ms);
   const bool run_part = std::any_of(ms.begin(), ms.end(), [](const ExperimentMean& m) { return m.headings_differ; });
   std::vector<ResidualAlignment> out;
   for (const Feature& f : features()) {
@@ -883,9 +901,9 @@ std::vector<ResidualAlignment> alignment(const Suite& suite, const SuiteModel& m
     scatter.description = f.scatter;
     if (!ms.empty()) {
       if (f.columns == 0) {
-        mean_group_test(ms, X0, mean);
+        mean_group_test(ms, design, mean);
       } else {
-        mean_feature_test(ms, X0, M, f, mean);
+        mean_feature_test(ms, design, f, mean);
       }
       scatter_feature_test(ms, f, scatter);
     }
