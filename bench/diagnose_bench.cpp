@@ -2,6 +2,7 @@
 // data/optiodom), imported into a temporary directory by the fixture, the model of order 2
 // (the default of fit and diagnose).
 //  * BM_Likelihood: one exact evaluation (every run propagated), the unit both paths pay;
+//  * BM_LikelihoodModel: the same with the in-sample loop's model (four effects and a group);
 //  * BM_CompareSimulation: compare with the in-sample loop's model (results/optiodom/
 //    model_all.yaml), its verdict calibrated by simulating the model's world (the referee);
 //  * BM_DiagnoseRound: one diagnose round from the plain model (13 candidates, two of them
@@ -94,6 +95,17 @@ void BM_Likelihood(benchmark::State& state) {
   const odomcov::Suite& suite = optiodom();
   const odomcov::SuiteModel model = odomcov::suite_model(suite);
   for (auto _ : state) benchmark::DoNotOptimize(odomcov::residuals(suite, model));
+  state.counters["runs"] = static_cast<double>(runs(suite));
+}
+
+/// One exact evaluation with the in-sample loop's model (results/optiodom/model_all.yaml: four
+/// systematic effects and a group_variation, order 2), the logged runs coarsened once as
+/// ResidualCache does: the unit cost of every fit's propagation once the loop has named effects.
+void BM_LikelihoodModel(benchmark::State& state) {
+  const odomcov::Suite& suite = optiodom_model_all();
+  const odomcov::SuiteModel model = odomcov::suite_model(suite);
+  const odomcov::CoarseRuns coarse = odomcov::coarsen_logged_runs(suite);
+  for (auto _ : state) benchmark::DoNotOptimize(odomcov::residuals(suite, model, &coarse));
   state.counters["runs"] = static_cast<double>(runs(suite));
 }
 
@@ -213,6 +225,7 @@ void BM_Predictive(benchmark::State& state) {
 const bool kExact = std::getenv("ODOMCOV_BENCH_EXACT") != nullptr;
 
 BENCHMARK(BM_Likelihood)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
+BENCHMARK(BM_LikelihoodModel)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
 BENCHMARK(BM_CompareSimulation)->Arg(0)->Arg(1)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 BENCHMARK(BM_DiagnoseRound)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(3);
 BENCHMARK(BM_Calibrate)->Arg(0)->Unit(benchmark::kSecond)->MeasureProcessCPUTime()->UseRealTime()->Iterations(1);
