@@ -52,8 +52,38 @@ cmake -S "$root" -B "$out/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
 cmake --build "$out/build" --parallel "$(nproc)" -- --quiet
 readelf -h "$out/build/src/cli/odomcov" | grep -q "AArch64" || { echo "cross_aarch64: not an aarch64 binary" >&2; exit 1; }
 cd "$out/build"
-# Under qemu-user the statistical tests run 60-80 times slower than natively: two of them
-# (Compare.SimulatedVerdictHasItsSizeAndPower, Compare.OverEveryLookACorrectModelIsRejectedAtMostAlpha)
-# took 1300-1450 s side by side on two cores, near ctest's default limit of 1500 s per test. The
-# limit is there to catch a hang, so it is 3600 s here.
-ctest --output-on-failure --parallel "$(nproc)" --timeout 3600 -R "[.]" "$@"
+# Under qemu-user the unit tests run 60-100 times slower than natively: on two cores, 235 of them
+# took 63 minutes (7533 s of CPU; 2026-12-01), most of CI's 90-minute budget with the native build and
+# tests beside. Three are left out here: the statistical checks of the fitting loop that cost
+# most under emulation and whose code has nothing that differs between the instruction sets.
+#   - Diagnose.FastAndExactAgreeOnTheWinnerWithANonlinearCandidate (912 s): the fast and exact
+#     fits of a custom effect, scalar likelihood code only;
+#   - Diagnose.TheTailsDecideBetweenANoiseLevelAndBumps (1082 s): the diagnose rule built on the
+#     tails test, whose own size and power (TailsTest.HasItsSizeOnCorrectModelsAndPowerOnWrongTails)
+#     are checked here;
+#   - Compare.OverEveryLookACorrectModelIsRejectedAtMostAlpha (1328 s): the referee's size over
+#     every look, whose size and power at one look (Compare.SimulatedVerdictHasItsSizeAndPower,
+#     1618 s) are checked here.
+# The NEON kernel's bits are pinned against the scalar reference (Simulator.* and the effect
+# tests), so these three would see the same numbers as natively, where scripts/test.sh runs them.
+# ODOMCOV_AARCH64_ALL=1 runs every unit test. ctest's limit per test is there to catch a hang,
+# so it is 3600 s here (the default 1500 s is near the slowest tests' time under emulation).
+skip="^(Diagnose[.]FastAndExactAgreeOnTheWinnerWithANonlinearCandidate|Diagnose[.]TheTailsDecideBetweenANoiseLevelAndBumps|Compare[.]OverEveryLookACorrectModelIsRejectedAtMostAlpha)$"
+[ "${ODOMCOV_AARCH64_ALL:-0}" = 1 ] && skip="^$"
+# ctest starts the tests its cost data (from an earlier run in this tree) say are longest first;
+# a fresh tree has none and starts them in the order they are defined, where the slowest comes
+# near the end and would run alone for its last 20 minutes. So a fresh tree gets the emulated
+# seconds of the slowest tests measured above ("name runs seconds", ctest's own format).
+costs=Testing/Temporary/CTestCostData.txt
+if [ ! -s "$costs" ]; then
+  mkdir -p Testing/Temporary
+  printf '%s\n' "Compare.SimulatedVerdictHasItsSizeAndPower 1 1618" \
+    "TailsTest.HasItsSizeOnCorrectModelsAndPowerOnWrongTails 1 417" \
+    "Statistics.AdfTestHasItsSizeOnABananaWhereTheLrtDoesNot 1 283" \
+    "SequentialMcTest.KeepsItsSizeOverEveryLookOnExchangeableScores 1 195" \
+    "Verdict.ConstantNoiseLevelIsNotAdoptedForNoiseThatGrowsWithSpeed 1 152" \
+    "ResidualFeatures.SimulatedDispersionKeepsTheScatterTestsSizeOnHeavyTails 1 145" \
+    "Design.CalibrateAdvisesTheRunsThatSizeWhatItCouldNotSeparate 1 120" \
+    "Simulator.NoiseInducedMeanMatchesLargeNoise 1 116" "---" > "$costs"
+fi
+ctest --output-on-failure --parallel "$(nproc)" --timeout 3600 -R "[.]" -E "$skip" "$@"
