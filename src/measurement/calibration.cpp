@@ -237,6 +237,23 @@ bool at_far_bound(const Handle& h, double u, double within) {
   return (u - h.lower_u < within && !neutral(h.lower_u)) || (h.upper_u - u < within && !neutral(h.upper_u));
 }
 
+/// FitResult::rank of an observed information matrix.
+int information_rank(const Eigen::MatrixXd& H) {
+  const Eigen::Index n = H.rows();
+  Eigen::VectorXd scale = Eigen::VectorXd::Zero(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (H(i, i) > 0 && std::isfinite(H(i, i))) scale(i) = 1.0 / std::sqrt(H(i, i));
+  }
+  const Eigen::MatrixXd unit = scale.asDiagonal() * H * scale.asDiagonal();
+  if (!unit.allFinite()) return 0;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(unit, Eigen::EigenvaluesOnly);
+  if (eig.info() != Eigen::Success || n == 0) return 0;
+  const double largest = eig.eigenvalues().maxCoeff();
+  int rank = 0;
+  for (Eigen::Index i = 0; i < n; ++i) rank += eig.eigenvalues()(i) > kInformationRankTolerance * largest ? 1 : 0;
+  return rank;
+}
+
 /// The estimates, their (robust) standard errors and covariance at u from the information.
 void fill_estimates(FitResult& out, const std::vector<Handle>& handles, const std::vector<double>& u,
                     const Box& box, const Information& info) {
@@ -251,6 +268,7 @@ void fill_estimates(FitResult& out, const std::vector<Handle>& handles, const st
     out.values(static_cast<Eigen::Index>(i)) = handles[i].from_u(u[i]);
     jacobian(static_cast<Eigen::Index>(i)) = handles[i].dv_du(u[i]);
   }
+  out.rank = information_rank(info.H);
   const Eigen::LLT<Eigen::MatrixXd> llt(info.H);
   if (llt.info() != Eigen::Success) {
     out.warnings.push_back(

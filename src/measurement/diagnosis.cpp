@@ -925,16 +925,19 @@ std::string joined(const std::vector<std::string>& list) {
   return text;
 }
 
-/// The round's full model: the base with every significant candidate judged on the mean (one
-/// per effect), and the names to fit. A candidate's own model leaves in the scatter whatever
-/// other effect the world has, so with two large effects each would be judged against the
-/// other's misfit and neither adopted (the nested F test's trap in forward selection); the
-/// full model's residual scatter is the one a term is tested against in a multiple regression.
-void plan_full_model(Round& round, const std::vector<Trial>& trials) {
+/// The round's full model: the base with every significant candidate judged on the mean whose
+/// predicted means gain significantly (one per effect; a candidate stopped by rule 2b, "covariance,
+/// not mean", fits no direction of the means), and the names to fit. A candidate's own model
+/// leaves in the scatter whatever other effect the world has, so with two large effects each
+/// would be judged against the other's misfit and neither adopted (the nested F test's trap in
+/// forward selection); the full model's residual scatter is the one a term is tested against in
+/// a multiple regression.
+void plan_full_model(Round& round, const std::vector<Trial>& trials, double per_candidate) {
   round.full = round.base;
   round.full_names = round.nuisance.systematic;
   for (const Trial& t : trials) {
     if (!t.c.significant || !judged_on_mean(t, t.c.model) || reported_by_names(*t.type)) continue;
+    if (std::isfinite(t.c.mean_p_value) && !(t.c.mean_p_value < per_candidate)) continue;
     const EffectSpec* spec = find_spec(t.c.model.effects, t.type->effect);
     if (!spec || find_spec(round.full.effects, t.type->effect)) continue;
     round.full.effects.push_back(*spec);
@@ -954,7 +957,12 @@ const MeanDispersion& full_model_dispersion(Round& round) {
     round.check_cancel();
     const FitResult r = fit(round.suite, round.full, round.full_names, Likelihood::full, round.counter(),
                             round.path, &round.cache);
-    d = mean_dispersion(with_means(round.cache.at(r.model), round.base_inflated), round.full_names.size());
+    // Less the parameters' rank, not their count: the full model holds every significant
+    // candidate, nested ones beside their containers (wheelbase_error inside
+    // turn_dependent_wheelbase) and effects the runs cannot size, which fit no direction of the
+    // means; counting them would leave the scatter next to no degrees of freedom and the rule
+    // no power to pass anything.
+    d = mean_dispersion(with_means(round.cache.at(r.model), round.base_inflated), static_cast<std::size_t>(r.rank));
   } catch (const Cancelled&) {
     throw;
   } catch (const std::exception&) {
@@ -1409,8 +1417,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   // finalists' folds).
   if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
   std::vector<Trial> trials = fit_trials(round, types, d.runs, options.alpha);
-  plan_full_model(round, trials);
   const double per_candidate = options.alpha / static_cast<double>(std::max<std::size_t>(1, trials.size()));
+  plan_full_model(round, trials, per_candidate);
   for (std::size_t i = 0; i < trials.size() && trials[i].c.significant && !d.best; ++i) {
     if (judge(round, trials[i], per_candidate, d.before, d.runs)) d.best = i;
   }

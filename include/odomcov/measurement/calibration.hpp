@@ -136,7 +136,19 @@ struct FitResult {
   std::vector<std::string> at_bound;
   std::vector<std::string> warnings;
   SuiteModel model;  // the fitted model
+  /// How many directions of the parameters the data determine: the numerical rank of the
+  /// observed information scaled to unit diagonal (eigenvalues above kInformationRankTolerance of
+  /// the largest; a parameter with no information counts nothing). Below names.size() when some
+  /// parameters act only together (a wheelbase and a spin wheelbase on runs that only spin) or
+  /// not at all (an arc wheelbase without arcs): the residual degrees of freedom of a fit are the
+  /// data's count less this, not less the names.
+  int rank = 0;
 };
+
+/// FitResult::rank's tolerance: an eigenvalue of the unit-diagonal information below this
+/// fraction of the largest is a direction the data do not determine (a correlation within 5e-7
+/// of 1 between two parameters; a finite-difference Hessian resolves about 1e-8 of its scale).
+inline constexpr double kInformationRankTolerance = 1e-6;
 
 /// Maximises the suite's Gaussian log-likelihood over the named parameters with NLopt's
 /// BOBYQA (bounded, derivative-free), each parameter in a transformed coordinate in which it is
