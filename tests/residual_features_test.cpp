@@ -452,8 +452,17 @@ TEST(Verdict, WheelbaseImitatingASpeedScaleIsStoppedByTheScatterItLeaves) {
 // and speed on the scatter is the misfit's first feature. With a true scale error beside the
 // same noise (speed_noise_with_scale.yaml), the rule lets it through and it is adopted. (Only
 // scale_error is offered: the full catalogue's verdicts on this world are the blind batch's.)
+// Whether a lab draws the case depends on its realisation; measured over seeds 1-30 with the
+// random stream of 2026-12: scale_error is significant by the likelihood ratio in 6 of the 30
+// noise-only labs and the rule stops it in 5 (dispersed p 0.02-0.20; seed 9, p = 0.0013, is
+// adopted: a mimic in 1 lab of 30), and speed on the scatter comes first in all 30; with the
+// true scale error the rule never stops it (dispersed p <= 1.1e-4 in all 30) and it is adopted
+// in 25 (in the other 5 one kind of path held out loses more than kMaxFoldLoss: a mimic by the
+// held-out rule). The test takes seed 2 and seed 1, the first of each case.
 TEST(Verdict, ASecondOrderMeanOfSpeedNoiseIsNotAScaleError) {
-  const Suite s = lab({kSource + "/tests/data/worlds/speed_noise_second_order.yaml"});
+  WorldFile noise = load_world(kSource + "/tests/data/worlds/speed_noise_second_order.yaml");
+  noise.seed = 2;
+  const Suite s = seeded_lab(noise);
   const Diagnosis d = diagnose(s, suite_model(s), kDiagnoseAlpha, {"scale_error"});
   const auto scale = std::find_if(d.candidates.begin(), d.candidates.end(),
                                   [](const Candidate& c) { return c.effect == "scale_error"; });
@@ -470,7 +479,9 @@ TEST(Verdict, ASecondOrderMeanOfSpeedNoiseIsNotAScaleError) {
   EXPECT_EQ(d.residuals.front().feature, "speed");
   EXPECT_EQ(d.residuals.front().part, "scatter");
 
-  const Suite real = lab({kSource + "/tests/data/worlds/speed_noise_with_scale.yaml"});
+  WorldFile with_true_scale = load_world(kSource + "/tests/data/worlds/speed_noise_with_scale.yaml");
+  with_true_scale.seed = 1;
+  const Suite real = seeded_lab(with_true_scale);
   const Diagnosis with_scale = diagnose(real, suite_model(real), kDiagnoseAlpha, {"scale_error"});
   ASSERT_TRUE(with_scale.best.has_value());
   const Candidate& adopted = with_scale.candidates[*with_scale.best];

@@ -1,42 +1,39 @@
 // Counter-based random numbers for the simulator: Philox4x32-10 [Salmon11] from Random123, and
-// standard normals by the ziggurat method with 256 blocks [Marsaglia00] in the ZIGNOR form of
-// [Doornik05], which takes the block index and the value from disjoint bits.
+// standard normals by inversion of one 32-bit word each (base/normal_icdf-inl.hpp).
 //
 // Stream layout. One key per seed; every draw is Philox(counter, key) with
-//   counter = (sample index, stream tag, run index low 32 bits, run index high 32 bits).
-// A run's numbers therefore depend only on (seed, run, sample, tag): not on the thread, the
-// lane or the order in which runs are simulated. A tag is a 24-bit base plus, in bits 24..31,
-// the attempt number k >= 1 of a ziggurat retry (k = 0 is the first draw). Bases:
-//   kTagWheelNoise       the two wheel normals of each sample (128 bits, one per 64)
-//   kTagWheelRetry + w   retries of the normal of wheel w (0 left, 1 right)
-//   kTagEffect | e << 8 | i   per-sample draw i (< 256) of effect slot e (< 16)
-//   kTagPerRun | e << 8       per-run draws of effect slot e (the counter's sample = draw number)
-//   kTagMeasurement           measurement noise of synthesised suites
-//   kTagGroup                 group_variation's draw per group (run = hash of the group name)
-//   kTagStartHeading          a synthesised run's start heading (world experiments' heading0)
+//   counter = (index >> 2, stream tag, run index low 32 bits, run index high 32 bits),
+// and a draw's four output words serve four consecutive indices: index i reads word i & 3 of the
+// draw at i >> 2. The index is the sample for per-sample streams and the draw number for per-run
+// ones. A run's numbers therefore depend only on (seed, run, index, tag): not on the thread, the
+// lane or the order in which runs are simulated. (tag, index) names one 32-bit word; a normal and
+// a uniform at the same (tag, index) are functions of that one word. Tags:
+//   kTagWheelLeft, kTagWheelRight   the wheel normals of each sample
+//   kTagEffect | e << 8 | i         per-sample draw i (< 256) of effect slot e (< 16)
+//   kTagPerRun | e << 8             per-run draws of effect slot e (index = draw number)
+//   kTagMeasurement                 measurement noise of synthesised suites
+//   kTagGroup                       group_variation's draw per group (run = hash of the group name)
+//   kTagStartHeading                a synthesised run's start heading (world experiments' heading0)
 //
 // The seed -> numbers mapping, in full (docs/performance.md; the SIMD kernels keep it exactly):
-// key = (seed bits 0-31, seed bits 32-63). A draw's four output words w0..w3 give two 64-bit
-// candidates, lo = w0 | w1 << 32 and hi = w2 | w3 << 32: a sample's left wheel normal comes from
-// lo and its right wheel normal from hi of the draw at kTagWheelNoise; a per-sample or per-run
-// normal of an effect from lo of its own draw. A candidate is a normal by ZIGNOR: block
-// i = bits 0-7, sign = bit 8, u = bits 12-63 / 2^52; accepted when u < ratio[i] (z = +-u x[i]),
-// else zig_slow: the wedge test with the polynomial exp of wedge_exp-inl.hpp (no C library
-// function, so every machine decides it alike), the tail by std::log, new candidates from the
-// retry draws. Test: Simulator.SeedGivesTheDocumentedBits pins three runs' bits.
+// key = (seed bits 0-31, seed bits 32-63); a word becomes a normal by normal_from_word (bit 31
+// the sign, bits 0-30 a point of a 2^31 grid inverted through the normal CDF in single precision)
+// and a uniform by uniform_from_word ((word + 1/2) 2^-32). Tests: Random.* pin the words and the
+// normals; Simulator.SeedGivesTheDocumentedBits pins three runs' bits.
 #pragma once
 
 #include <Random123/philox.h>
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 
 namespace odomcov::random {
 
 using Philox = r123::Philox4x32;  // 10 rounds
 
-inline constexpr std::uint32_t kTagWheelNoise = 0;
-inline constexpr std::uint32_t kTagWheelRetry = 1;     // + wheel
+inline constexpr std::uint32_t kTagWheelLeft = 0;
+inline constexpr std::uint32_t kTagWheelRight = 1;
 inline constexpr std::uint32_t kTagEffect = 0x10000;
 inline constexpr std::uint32_t kTagPerRun = 0x20000;
 inline constexpr std::uint32_t kTagMeasurement = 0x30000;
@@ -45,8 +42,6 @@ inline constexpr std::uint32_t kTagStartHeading = 0x50000;
 /// derive_seed(seed, kGroupSeedStream) keys the group draws (group_effects), apart from every
 /// experiment's own seed derive_seed(seed, i) for i < 2^62.
 inline constexpr std::uint64_t kGroupSeedStream = 0xC000000000000001ull;
-inline constexpr int kRetryShift = 24;
-inline constexpr std::uint32_t kMaxRetries = 255;
 
 /// SplitMix64 [Steele14]: a bijective 64-bit mixer.
 inline std::uint64_t splitmix64(std::uint64_t x) {
@@ -65,85 +60,84 @@ inline Philox::key_type key_from_seed(std::uint64_t seed) {
   return {{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32)}};
 }
 
-inline Philox::ctr_type counter(std::uint64_t run, std::uint32_t sample, std::uint32_t tag) {
-  return {{sample, tag, static_cast<std::uint32_t>(run), static_cast<std::uint32_t>(run >> 32)}};
+inline Philox::ctr_type counter(std::uint64_t run, std::uint32_t quad, std::uint32_t tag) {
+  return {{quad, tag, static_cast<std::uint32_t>(run), static_cast<std::uint32_t>(run >> 32)}};
 }
 
-/// The four 32-bit words of one draw, as two 64-bit halves.
-struct Bits128 {
-  std::uint64_t lo;
-  std::uint64_t hi;
+/// The four words of indices 4 quad .. 4 quad + 3 of stream `tag` of `run`.
+inline Philox::ctr_type draw4(const Philox::key_type& key, std::uint64_t run, std::uint32_t quad,
+                              std::uint32_t tag) {
+  return Philox()(counter(run, quad, tag), key);
+}
+
+/// The word of index `index` of stream `tag` of `run`.
+inline std::uint32_t word_at(const Philox::key_type& key, std::uint64_t run, std::uint32_t index,
+                             std::uint32_t tag) {
+  return draw4(key, run, index >> 2, tag)[index & 3];
+}
+
+/// The scalar arithmetic of normal_icdf-inl.hpp.
+struct ScalarOps {
+  using F = float;
+  using I = std::int32_t;
+  using M = bool;
+  static F f(float c) { return c; }
+  static I i(std::int32_t c) { return c; }
+  static F to_float(I v) { return static_cast<float>(v); }
+  static I bits(F v) {
+    I b;
+    std::memcpy(&b, &v, sizeof b);
+    return b;
+  }
+  static F from_bits(I b) {
+    F v;
+    std::memcpy(&v, &b, sizeof v);
+    return v;
+  }
+  static I shr23(I v) { return v >> 23; }  // arithmetic (C++20, and every compiler before)
+  static I shl23(I v) { return static_cast<I>(static_cast<std::uint32_t>(v) << 23); }
+  static F sqrt(F v) { return std::sqrt(v); }
+  static M ge(F a, F b) { return a >= b; }
+  static bool any(M m) { return m; }
+  static F select(M m, F yes, F no) { return m ? yes : no; }
+  static I And(I a, I b) { return a & b; }
+  static I Xor(I a, I b) { return a ^ b; }
 };
 
-inline Bits128 draw(const Philox::key_type& key, std::uint64_t run, std::uint32_t sample,
-                    std::uint32_t tag) {
-  const Philox::ctr_type out = Philox()(counter(run, sample, tag), key);
-  return {out[0] | (std::uint64_t{out[1]} << 32), out[2] | (std::uint64_t{out[3]} << 32)};
+#include "base/normal_icdf-inl.hpp"  // IWYU pragma: export
+
+/// The standard normal of one word (normal_icdf-inl.hpp; what every SIMD target computes).
+inline float normal_from_word(std::uint32_t word) {
+  const std::int32_t w[1] = {static_cast<std::int32_t>(word)};
+  float z[1];
+  normal_icdf<ScalarOps, 1>(w, z);
+  return z[0];
 }
 
-/// Uniform in [0, 1) with 52 random bits (bits 12..63), exactly as the vector kernel builds it:
-/// the bits become the mantissa of a double in [1, 2), minus one.
-inline double uniform52(std::uint64_t bits) {
-  const std::uint64_t mantissa = (bits >> 12) | 0x3FF0000000000000ull;
-  double one_to_two;
-  static_assert(sizeof one_to_two == sizeof mantissa);
-  __builtin_memcpy(&one_to_two, &mantissa, sizeof one_to_two);
-  return one_to_two - 1.0;
+/// The standard normals of N words at once (the same values as normal_from_word, word by word;
+/// N independent chains, faster than one at a time).
+template <int N>
+inline void normals_from_words(const std::uint32_t (&words)[N], float (&z)[N]) {
+  std::int32_t w[N];
+  for (int j = 0; j < N; ++j) w[j] = static_cast<std::int32_t>(words[j]);
+  normal_icdf<ScalarOps, N>(w, z);
 }
 
-/// Uniform in (0, 1], for logarithms.
-inline double uniform52_open0(std::uint64_t bits) { return 1.0 - uniform52(bits); }
-
-/// Ziggurat tables for N(0, 1), 256 blocks of equal area V with right edge R [Marsaglia00].
-/// x[0] = V/f(R) is the base block's virtual width; x[256] = 0; ratio[i] = x[i+1]/x[i].
-struct ZigguratTables {
-  static constexpr int kBlocks = 256;
-  static constexpr double kR = 3.6541528853610088;
-  double v;  // R f(R) + int_R^inf f, computed from R so the top block closes exactly
-  alignas(64) double x[kBlocks + 1];
-  alignas(64) double ratio[kBlocks];
-  ZigguratTables();
-};
-extern const ZigguratTables kZiggurat;
-
-/// A 64-bit candidate: index = bits 0..7, sign = bit 8, magnitude = bits 12..63.
-inline int zig_index(std::uint64_t bits) { return static_cast<int>(bits & 0xFF); }
-inline bool zig_negative(std::uint64_t bits) { return (bits & 0x100) != 0; }
-
-/// The fast path: accepted when the uniform falls inside the block's inner rectangle (98.8%).
-inline bool zig_fast(std::uint64_t bits, double& z) {
-  const int i = zig_index(bits);
-  const double u = uniform52(bits);
-  if (u >= kZiggurat.ratio[i]) return false;
-  z = (zig_negative(bits) ? -u : u) * kZiggurat.x[i];
-  return true;
+/// The uniform of one word, (word + 1/2) 2^-32: in (0, 1), never 0 or 1 (exact in a double).
+inline double uniform_from_word(std::uint32_t word) {
+  return (static_cast<double>(word) + 0.5) * 0x1p-32;
 }
 
-/// The full ziggurat for a candidate rejected by zig_fast: the wedge test (its exp is the
-/// polynomial of wedge_exp-inl.hpp, the same on every machine and instruction set), the tail
-/// (Marsaglia's exponential method, std::log) and new candidates, drawing fresh bits at
-/// (run, sample, retry_base | k << kRetryShift) for attempts k = 1, 2, ... (from
-/// `first_attempt` on: the SIMD kernel hands over a tail candidate at its attempt).
-double zig_slow(std::uint64_t bits, const Philox::key_type& key, std::uint64_t run,
-                std::uint32_t sample, std::uint32_t retry_base, std::uint32_t first_attempt = 1);
-
-/// A standard normal from a 64-bit candidate (fast path, else the full method).
-inline double normal(std::uint64_t bits, const Philox::key_type& key, std::uint64_t run,
-                     std::uint32_t sample, std::uint32_t retry_base) {
-  double z;
-  return zig_fast(bits, z) ? z : zig_slow(bits, key, run, sample, retry_base);
-}
-
-/// A standard normal for effects and per-run draws: one Philox draw per value at `tag`.
-inline double normal_at(const Philox::key_type& key, std::uint64_t run, std::uint32_t sample,
+/// A standard normal at (index, tag) of `run`: effects, per-run and measurement draws.
+inline double normal_at(const Philox::key_type& key, std::uint64_t run, std::uint32_t index,
                         std::uint32_t tag) {
-  return normal(draw(key, run, sample, tag).lo, key, run, sample, tag);
+  return normal_from_word(word_at(key, run, index, tag));
 }
 
-/// Uniform in [0, 1) for effects: one Philox draw per value at `tag`.
-inline double uniform_at(const Philox::key_type& key, std::uint64_t run, std::uint32_t sample,
+/// A uniform in (0, 1) at (index, tag) of `run`.
+inline double uniform_at(const Philox::key_type& key, std::uint64_t run, std::uint32_t index,
                          std::uint32_t tag) {
-  return uniform52(draw(key, run, sample, tag).lo);
+  return uniform_from_word(word_at(key, run, index, tag));
 }
 
 }  // namespace odomcov::random

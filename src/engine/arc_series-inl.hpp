@@ -38,6 +38,23 @@ inline __attribute__((always_inline)) V sinc_series(V h2, K k) {
                            h2 * (k(kSinc4) + h2 * (k(kSinc5) + h2 * (k(kSinc6) + h2 * k(kSinc7)))))));
 }
 
+/// The short series (LegStep::short_series): the long ones' leading terms.
+template <class V, class K>
+inline __attribute__((always_inline)) V sin_short(V eps, V e2, K k) {
+  using namespace ::odomcov::arc::constants;
+  return eps * (k(1.0) + e2 * (k(kSin1) + e2 * k(kSin2)));
+}
+template <class V, class K>
+inline __attribute__((always_inline)) V cos_short(V e2, K k) {
+  using namespace ::odomcov::arc::constants;
+  return k(1.0) + e2 * (k(kCos1) + e2 * (k(kCos2) + e2 * k(kCos3)));
+}
+template <class V, class K>
+inline __attribute__((always_inline)) V sinc_short(V h2, K k) {
+  using namespace ::odomcov::arc::constants;
+  return k(1.0) + h2 * (k(kSinc1) + h2 * (k(kSinc2) + h2 * k(kSinc3)));
+}
+
 /// The rest of the step once cos h, sin h and sinc h are known.
 template <class V>
 inline __attribute__((always_inline)) void advance(Pose<V>& p, V ds, V ch, V sh, V sinc, V h) {

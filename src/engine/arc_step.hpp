@@ -22,6 +22,11 @@ namespace odomcov::arc {
 inline constexpr double kEpsTaylorMax = 0.05;
 /// |h| up to which the sinc polynomial (through h^14) is exact: h^16/17! < 1e-20 at 0.45.
 inline constexpr double kSincSeriesMax = 0.45;
+/// The short series of a leg whose samples turn little (LegStep::short_series): sin eps through
+/// eps^5 (first omitted term eps^6/7! < 5.2e-17 relative at 0.008), cos eps through eps^6
+/// (eps^8/8! < 5e-22) and sinc h through h^6 (h^8/9! < 1.8e-17 at 0.04), each below half an ulp.
+inline constexpr double kEpsShortMax = 0.008;
+inline constexpr double kSincShortMax = 0.04;
 /// Every this many samples the heading vector is renormalised (rotation rounding otherwise
 /// random-walks its length by ~1e-16 per sample).
 inline constexpr std::uint32_t kRenormMask = 1023;
@@ -45,7 +50,19 @@ struct LegStep {
   double inv_two_b = 0.0;  // 1/(2B), B the true wheelbase
   double lateral_m = 0.0;  // leftward slip per sample (Systematic::lateral x (|L| + |R|)/2)
   bool series_sinc = true;  // |h0| <= kSincSeriesMax: most lanes take the sinc series
+  /// |h0| and the wheel noise small enough that nearly every sample is within the short series'
+  /// bounds (short_series_for): a sample then takes them when |eps| <= kEpsShortMax and
+  /// |h| <= kSincShortMax, else the long ones. Speed only: a sample's rule is this flag and its
+  /// own eps and h, the same in the reference and every SIMD lane.
+  bool short_series = false;
 };
+
+/// Whether a leg takes the short series: |h0| + 5 sd(eps) <= kSincShortMax and
+/// 5 sd(eps) <= kEpsShortMax (a sample outside them, p < 6e-7, takes the long ones).
+inline bool short_series_for(double half_rad, double sigma_left, double sigma_right, double inv_two_b) {
+  const double sd_eps = std::sqrt(sigma_left * sigma_left + sigma_right * sigma_right) * inv_two_b;
+  return std::abs(half_rad) + 5.0 * sd_eps <= kSincShortMax && 5.0 * sd_eps <= kEpsShortMax;
+}
 
 // The polynomials and the rest of the step, templates over the value type. They are in a file of
 // their own because a SIMD target must compile its own copy inside its target region (Highway's
@@ -58,9 +75,15 @@ inline double identity(double v) { return v; }
 inline void step(Pose<double>& p, const LegStep& leg, double noise_l, double noise_r) {
   const double eps = (noise_r - noise_l) * leg.inv_two_b;
   const double ds = leg.center_m + 0.5 * (noise_l + noise_r);
+  const double h = leg.half_rad + eps;
+  const double e2 = eps * eps;
+  const bool short_series =
+      leg.short_series && std::abs(eps) <= kEpsShortMax && std::abs(h) <= kSincShortMax;
   double ce, se;
-  if (std::abs(eps) <= kEpsTaylorMax) {
-    const double e2 = eps * eps;
+  if (short_series) {
+    se = sin_short(eps, e2, identity);
+    ce = cos_short(e2, identity);
+  } else if (std::abs(eps) <= kEpsTaylorMax) {
     se = sin_taylor(eps, e2, identity);
     ce = cos_taylor(e2, identity);
   } else {
@@ -69,8 +92,9 @@ inline void step(Pose<double>& p, const LegStep& leg, double noise_l, double noi
   }
   const double ch = leg.cos_half * ce - leg.sin_half * se;
   const double sh = leg.sin_half * ce + leg.cos_half * se;
-  const double h = leg.half_rad + eps;
-  const double sinc = std::abs(h) <= kSincSeriesMax ? sinc_series(h * h, identity) : sh / h;
+  const double sinc = short_series                   ? sinc_short(h * h, identity)
+                      : std::abs(h) <= kSincSeriesMax ? sinc_series(h * h, identity)
+                                                      : sh / h;
   if (leg.lateral_m != 0.0) {
     advance_lateral(p, ds, leg.lateral_m, ch, sh, sinc, h);
   } else {

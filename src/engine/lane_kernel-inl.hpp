@@ -3,15 +3,16 @@
 // lock step, run j of the block in lane j, structure of arrays: K vectors of N doubles each.
 //
 // Per sample and lane it does exactly what the scalar reference (simulator.cpp) does per run:
-//   * Philox4x32-10 at counter (sample, tag, run lo, run hi), with the four 32-bit words held in
-//     64-bit lanes (the 32x32 -> 64 multiply is MulEven; the upper half of a word may hold garbage
-//     between rounds because MulEven reads only the lower half, so no masking per round);
-//   * ZIGNOR ziggurat normals: the fast path in vectors (two gathers), the ~1.2% rejected lanes by
-//     the scalar method (random::zig_slow, the reference's own code);
+//   * Philox4x32-10 at counter (sample / 4, tag, run lo, run hi), with the four 32-bit words held
+//     in 64-bit lanes (the 32x32 -> 64 multiply is MulEven; the upper half of a word may hold
+//     garbage between rounds because MulEven reads only the lower half, so no masking per round);
+//     its four words are the stream's words of four consecutive samples;
+//   * a normal per word by inversion (base/normal_icdf-inl.hpp) in single precision, two samples'
+//     words of kN runs per vector of floats, branch-free but for the rare tails;
 //   * the stochastic effects' operations of the leg (plan.ops), events per lane in scalar code;
 //   * the exact arc step of arc_step.hpp; lanes outside its series bounds take the scalar step.
-// Only IEEE-exact operations (+ - * / sqrt, comparisons, bit operations) are used, never MulAdd,
-// so every target gives the scalar reference's bits.
+// Only IEEE-exact operations (+ - * / sqrt, conversions, comparisons, bit operations) are used,
+// never MulAdd, so every target gives the scalar reference's bits.
 
 #if defined(ODOMCOV_ENGINE_LANE_KERNEL_INL_HPP_) == defined(HWY_TARGET_TOGGLE)
 #ifdef ODOMCOV_ENGINE_LANE_KERNEL_INL_HPP_
@@ -45,6 +46,11 @@ using MF = hn::Mask<DF>;
 inline constexpr std::size_t kN = hn::MaxLanes(DF());
 inline constexpr std::size_t kK = kN >= 8 ? 4 : kN >= 4 ? 2 : 4;
 inline constexpr std::size_t kBlock = kN * kK;
+/// Whether the two wheels' Philox draws of a quad run interleaved (2 kK chains): where one
+/// wheel's kK chains leave the vector units waiting for a round's latency (AVX2's 2 chains: its
+/// plain kernel 3-7% faster together, simulator_roofline A/B), not with AVX-512's 4, whose 8
+/// spill registers (7% slower together).
+inline constexpr bool kWheelsTogether = kBlock < 32;
 static_assert(kBlock <= kMaxRuns, "a block must fit the kernel's output");
 static_assert(kN <= 8 && kK <= 8, "a vector's mask must fit a byte, a row's a word");
 
@@ -91,13 +97,13 @@ HWY_INLINE VU mul_wide(VU a, std::uint32_t m) {
 #endif
 }
 
-/// Philox on the first kV vectors of counters at once (independent chains interleaved).
-template <std::size_t kV = kK>
-HWY_INLINE void philox(Words (&w)[kK], const RoundKeys& keys) {
-  static_assert(kV >= 1 && kV <= kK, "vectors of a block");
+/// Philox on C vectors of counters at once (independent chains interleaved: a round is a chain
+/// of a multiply, a shift and an xor, so a few vectors at a time wait for its latency).
+template <std::size_t C>
+HWY_INLINE void philox(Words (&w)[C], const RoundKeys& keys) {
   for (int r = 0; r < 10; ++r) {
     const VU k0 = splat_u(keys.k0[r]), k1 = splat_u(keys.k1[r]);
-    for (std::size_t k = 0; k < kV; ++k) {
+    for (std::size_t k = 0; k < C; ++k) {
       const VU p0 = mul_wide(w[k].w0, 0xD2511F53u);
       const VU p1 = mul_wide(w[k].w2, 0xCD9E8D57u);
       w[k].w0 = hn::Xor3(hn::ShiftRight<32>(p1), w[k].w1, k0);
@@ -108,127 +114,58 @@ HWY_INLINE void philox(Words (&w)[kK], const RoundKeys& keys) {
   }
 }
 
-/// Philox on the first `vectors` (1 .. kV) vectors only (the slow path's last, partial batch).
-template <std::size_t kV = kK>
-HWY_INLINE void philox_first(Words (&w)[kK], const RoundKeys& keys, std::size_t vectors) {
-  if constexpr (kV > 1) {
-    if (vectors < kV) return philox_first<kV - 1>(w, keys, vectors);
-  }
-  philox<kV>(w, keys);
-}
-
-/// The 64-bit candidate of words (lo, hi): lo | hi << 32.
-HWY_INLINE VU candidate(VU lo, VU hi) {
-  return hn::OrAnd(hn::ShiftLeft<32>(hi), lo, splat_u(0xFFFFFFFFu));
-}
-
 // ---------------------------------------------------------------------------------------------
 // Normals
 // ---------------------------------------------------------------------------------------------
 
-/// The ziggurat's fast path on N candidates (random::zig_fast in lanes); `accepted` marks the
-/// lanes it decided.
-HWY_INLINE VF zig_fast(VU bits, MF& accepted) {
-  const DF df;
-  const DI di;
-  const random::ZigguratTables& zig = random::kZiggurat;
-  const auto index = hn::BitCast(di, hn::And(bits, splat_u(0xFF)));
-  const VF u = hn::BitCast(df, hn::Or(hn::ShiftRight<12>(bits), splat_u(0x3FF0000000000000ull))) -
-               splat(1.0);
-  const VF width = hn::GatherIndex(df, zig.x, index);
-  const VF ratio = hn::GatherIndex(df, zig.ratio, index);
-  accepted = hn::Lt(u, ratio);
-  // sign u width: the sign bit of the candidate's bit 8 on the (non-negative) product.
-  const VU sign = hn::ShiftLeft<55>(hn::And(bits, splat_u(0x100)));
-  return hn::BitCast(df, hn::Xor(hn::BitCast(DU(), u * width), sign));
-}
+/// Floats per vector (2 kN: two samples of a vector's kN runs), and per half (one sample).
+using DF32 = hn::Repartition<float, DF>;
+using DH32 = hn::Rebind<float, DF>;
 
-HWY_INLINE VF uniform52(VU bits) {
-  return hn::BitCast(DF(), hn::Or(hn::ShiftRight<12>(bits), splat_u(0x3FF0000000000000ull))) -
-         splat(1.0);
-}
+#if HWY_TARGET != HWY_SCALAR
+using DI32 = hn::RebindToSigned<DF32>;
 
-// This target's copy of the wedge test's exp (base/wedge_exp-inl.hpp).
-#include "base/wedge_exp-inl.hpp"
-
-/// Candidates the fast path rejected, waiting for the slow path: each one's bits and where its
-/// normal goes (an index into the block's chunk of normals, which also says its sample, slot and
-/// lane) with the attempts made so far in bits 32..39.
-struct Rejects {
-  static constexpr std::size_t kCapacity = 512;
-  std::size_t count = 0;
-  alignas(64) std::uint64_t bits[kCapacity + kBlock], at[kCapacity + kBlock];
+/// This target's arithmetic for normal_icdf-inl.hpp.
+struct VecOps {
+  using F = hn::Vec<DF32>;
+  using I = hn::Vec<DI32>;
+  using M = hn::Mask<DF32>;
+  static HWY_INLINE F f(float c) { return hn::Set(DF32(), c); }
+  static HWY_INLINE I i(std::int32_t c) { return hn::Set(DI32(), c); }
+  static HWY_INLINE F to_float(I v) { return hn::ConvertTo(DF32(), v); }
+  static HWY_INLINE I bits(F v) { return hn::BitCast(DI32(), v); }
+  static HWY_INLINE F from_bits(I b) { return hn::BitCast(DF32(), b); }
+  static HWY_INLINE I shr23(I v) { return hn::ShiftRight<23>(v); }
+  static HWY_INLINE I shl23(I v) { return hn::ShiftLeft<23>(v); }
+  static HWY_INLINE F sqrt(F v) { return hn::Sqrt(v); }
+  static HWY_INLINE M ge(F a, F b) { return hn::Ge(a, b); }
+  static HWY_INLINE bool any(M m) { return !hn::AllFalse(DF32(), m); }
+  static HWY_INLINE F select(M m, F yes, F no) { return hn::IfThenElse(m, yes, no); }
+  static HWY_INLINE I And(I a, I b) { return hn::And(a, b); }
+  static HWY_INLINE I Xor(I a, I b) { return hn::Xor(a, b); }
 };
 
-/// Stores the lanes of `m` contiguously at `out` (a whole vector is written).
-HWY_INLINE void compress_store(VU v, hn::Mask<DU> m, std::uint64_t* out) {
-#if HWY_TARGET == HWY_AVX3 || HWY_TARGET == HWY_AVX3_DL
-  // vpcompressq in registers (Highway 1.0.3 copies a 2 KB table per call; the memory form of
-  // vpcompressq is microcoded on Zen 4).
-  hn::StoreU(VU{_mm512_maskz_compress_epi64(m.raw, v.raw)}, DU(), out);
-#else
-  hn::StoreU(hn::Compress(v, m), DU(), out);
-#endif
+// This target's copy of the normal generator (base/normal_icdf-inl.hpp).
+#include "base/normal_icdf-inl.hpp"
+
+/// The words of two samples as one vector of floats' worth: lo's kN words (the low half of each
+/// 64-bit lane), then hi's.
+HWY_INLINE VecOps::I pack(VU lo, VU hi) {
+  const DI32 d;
+  return hn::ConcatEven(d, hn::BitCast(d, hi), hn::BitCast(d, lo));
 }
 
-/// One attempt of the full ziggurat (random::zig_slow's loop body) on kBlock candidates at once
-/// (kK vectors, interleaved), each with its own counter: the fast test, then (unless every lane
-/// passed it) a fresh draw at the attempt's retry tag and the wedge test. state: 1 accepted (z
-/// holds the normal), 2 a tail candidate (the scalar method takes it over at this attempt), 0
-/// rejected again (bits holds the next candidate). `tag` carries the attempt k in bits 24..31.
-HWY_NOINLINE void zig_attempt(std::size_t vectors, const std::uint64_t* bits_in,
-                              const std::uint64_t* run, const std::uint64_t* sample,
-                              const std::uint64_t* tag, const RoundKeys& keys, double* z_out,
-                              std::uint64_t* bits_out, double* state) {
-  const DF df;
-  const DU du;
-  const DI di;
-  const random::ZigguratTables& zig = random::kZiggurat;
-  const auto c = [](double v) { return splat(v); };
-  VU bits[kK], sign[kK];
-  VF u[kK], xi[kK];
-  MF fast[kK];
-  bool all_fast = true;
-  for (std::size_t k = 0; k < vectors; ++k) {
-    bits[k] = hn::Load(du, bits_in + k * kN);
-    const auto index = hn::BitCast(di, hn::And(bits[k], splat_u(0xFF)));
-    u[k] = uniform52(bits[k]);
-    sign[k] = hn::ShiftLeft<55>(hn::And(bits[k], splat_u(0x100)));
-    xi[k] = hn::GatherIndex(df, zig.x, index);
-    fast[k] = hn::Lt(u[k], hn::GatherIndex(df, zig.ratio, index));
-    all_fast = all_fast && hn::AllTrue(df, fast[k]);
+/// The normals of a quad's draw for the block's kK vectors: z[2k] samples 0 and 1 of vector k's
+/// runs, z[2k + 1] samples 2 and 3.
+HWY_INLINE void quad_normals(const Words* w, VecOps::F (&z)[2 * kK]) {
+  VecOps::I words[2 * kK];
+  for (std::size_t k = 0; k < kK; ++k) {
+    words[2 * k] = pack(w[k].w0, w[k].w1);
+    words[2 * k + 1] = pack(w[k].w2, w[k].w3);
   }
-  if (all_fast) {  // new candidates mostly pass: no draw, no wedge
-    for (std::size_t k = 0; k < vectors; ++k) {
-      hn::Store(hn::BitCast(df, hn::Xor(hn::BitCast(du, u[k] * xi[k]), sign[k])), df, z_out + k * kN);
-      hn::Store(c(1.0), df, state + k * kN);
-    }
-    return;
-  }
-  Words w[kK];
-  for (std::size_t k = 0; k < vectors; ++k) {
-    const VU runs = hn::Load(du, run + k * kN);
-    w[k] = {hn::Load(du, sample + k * kN), hn::Load(du, tag + k * kN),
-            hn::And(runs, splat_u(0xFFFFFFFFu)), hn::ShiftRight<32>(runs)};
-  }
-  philox_first(w, keys, vectors);
-  for (std::size_t k = 0; k < vectors; ++k) {
-    const auto index = hn::BitCast(di, hn::And(bits[k], splat_u(0xFF)));
-    const auto tail = hn::AndNot(fast[k], hn::RebindMask(df, hn::Eq(index, hn::Zero(di))));
-    // The wedge: accept when f0 + U (f1 - f0) < 1 (see random.cpp).
-    const VF x = u[k] * xi[k];
-    const VF xn = hn::GatherIndex(df, zig.x + 1, index);
-    const VF f0 = wedge_exp(c(-0.5) * (xi[k] * xi[k] - x * x), c);
-    const VF f1 = wedge_exp(c(-0.5) * (xn * xn - x * x), c);
-    const VF u2 = uniform52(candidate(w[k].w2, w[k].w3));
-    const auto wedge = hn::AndNot(hn::Or(fast[k], tail), hn::Lt(f0 + u2 * (f1 - f0), c(1.0)));
-    const VF magnitude = hn::IfThenElse(fast[k], x, hn::IfThenElseZero(wedge, x));
-    hn::Store(hn::BitCast(df, hn::Xor(hn::BitCast(du, magnitude), sign[k])), df, z_out + k * kN);
-    hn::Store(candidate(w[k].w0, w[k].w1), du, bits_out + k * kN);
-    hn::Store(hn::IfThenElse(hn::Or(fast[k], wedge), c(1.0), hn::IfThenElseZero(tail, c(2.0))),
-              df, state + k * kN);
-  }
+  normal_icdf<VecOps, 2 * kK>(words, z);
 }
+#endif
 
 // ---------------------------------------------------------------------------------------------
 // The block
@@ -279,6 +216,7 @@ struct SharedLeg {
 struct LaneLegs {
   alignas(64) double center[kBlock], half[kBlock], cos_half[kBlock], sin_half[kBlock];
   alignas(64) double inv_two_b[kBlock], lateral[kBlock], sigma_left[kBlock], sigma_right[kBlock];
+  alignas(64) double short_series[kBlock];  // 1 where the lane's leg takes the short series
   Leg leg[kBlock];
   bool any_lateral = false;
 
@@ -287,6 +225,7 @@ struct LaneLegs {
     center[j] = l.center_m, half[j] = l.half_rad, cos_half[j] = l.cos_half;
     sin_half[j] = l.sin_half, inv_two_b[j] = l.inv_two_b, lateral[j] = l.lateral_m;
     sigma_left[j] = l.sigma_left, sigma_right[j] = l.sigma_right;
+    short_series[j] = l.short_series ? 1.0 : 0.0;
   }
 };
 
@@ -304,6 +243,7 @@ struct PerLaneLeg {
   HWY_INLINE VF sigma_left(std::size_t k) const { return at(t.sigma_left, k); }
   HWY_INLINE VF sigma_right(std::size_t k) const { return at(t.sigma_right, k); }
   HWY_INLINE bool any_lateral() const { return t.any_lateral; }
+  HWY_INLINE MF short_series(std::size_t k) const { return hn::Eq(at(t.short_series, k), splat(1.0)); }
   HWY_INLINE const Leg& of(std::size_t k, std::size_t j) const { return t.leg[k * kN + j]; }
 };
 
@@ -356,18 +296,35 @@ class Block {
     return at;
   }
 
-  /// The normals of samples n .. n+count-1 (count <= kChunk), from the leg at `at` on: the fast
-  /// path for every lane, then the slow path for the lanes it rejected.
+  /// The normals of samples n .. n+count-1 (count <= kChunk, n a multiple of kChunk): the wheels'
+  /// and, in the general kernel, the draws of the legs from `at` on. Whole quads of samples (one
+  /// Philox draw each); a quad past `count` is drawn and never read.
   void draw_chunk(LegCursor at, std::uint32_t n, std::uint32_t count) {
-    n0_ = n;
-    for (std::uint32_t s = 0; s < count;) {
-      const Leg& leg = *at.leg;
-      const std::uint32_t m = at.left(count - s);
-      for (std::uint32_t e = s + m; s < e; ++s) draw_sample(leg, n + s, s);
-      at.skip(m);
+    const std::uint32_t quads = (count + 3) / 4;
+    for (std::uint32_t q = 0; q < quads; ++q) {
+      if constexpr (kWheelsTogether) {
+        draw_normals<2>(n / 4 + q, {random::kTagWheelLeft, random::kTagWheelRight}, {0, 1}, 4 * q, 0, 4);
+      } else {
+        draw_normals<1>(n / 4 + q, {random::kTagWheelLeft}, {0}, 4 * q, 0, 4);
+        draw_normals<1>(n / 4 + q, {random::kTagWheelRight}, {1}, 4 * q, 0, 4);
+      }
     }
-    queue_rejected();
-    drain();
+    if constexpr (kGeneral) {
+      for (std::uint32_t s = 0; s < count;) {
+        const Leg& leg = *at.leg;
+        const std::uint32_t m = at.left(count - s);
+        for (std::uint32_t d = leg.draws_begin; d < leg.draws_end; ++d) {
+          // A quad the leg shares with its neighbour keeps the neighbour's samples' values.
+          for (std::uint32_t q = s / 4; 4 * q < s + m; ++q) {
+            const std::uint32_t from = s > 4 * q ? s - 4 * q : 0;
+            const std::uint32_t to = s + m < 4 * q + 4 ? s + m - 4 * q : 4;
+            draw_normals<1>(n / 4 + q, {plan_.draw_tags[d]}, {2 + d - leg.draws_begin}, 4 * q, from, to);
+          }
+        }
+        at.skip(m);
+        s += m;
+      }
+    }
   }
 
   /// The steps of samples n .. n+count-1 from their normals; `at` moves past them. The poses
@@ -391,145 +348,66 @@ class Block {
     for (std::size_t k = 0; k < kK; ++k) p_[k] = p[k];
   }
 
-  /// The Philox words at (n, tag) for every lane of the block.
-  HWY_INLINE void draw(std::uint32_t n, std::uint32_t tag, Words (&w)[kK]) const {
+  /// The Philox words at (quad, tag) for every lane of the block.
+  HWY_INLINE void draw(std::uint32_t quad, std::uint32_t tag, Words (&w)[kK]) const {
     for (std::size_t k = 0; k < kK; ++k) {
-      w[k] = {splat_u(n), splat_u(tag), run_lo_[k], run_hi_[k]};
+      w[k] = {splat_u(quad), splat_u(tag), run_lo_[k], run_hi_[k]};
     }
     philox(w, keys_);
   }
 
-  /// The fast path of the normal from `bits` into slot `slot` of chunk sample s; a lane it
-  /// rejected keeps its candidate's bits there instead, for the slow path, and its bit in the
-  /// rejected lanes' mask (fixed addresses, no branch). Returns the rejected lanes.
-  HWY_INLINE MF normal(VU bits, std::size_t k, std::uint32_t s, std::size_t slot) {
-    MF accepted;
-    const VF z = zig_fast(bits, accepted);
-    hn::Store(hn::IfThenElse(accepted, z, hn::BitCast(DF(), bits)), DF(), &z_[s][slot][k * kN]);
-    const MF rejected = hn::Not(accepted);
-    hn::StoreMaskBits(DF(), rejected, &rejected_[s][slot][k]);
-    return rejected;
-  }
-
-  /// Marks slot `slot` of chunk sample s when the fast path rejected any of its lanes (from the
-  /// masks in registers, not the mask bytes just stored).
-  HWY_INLINE void flag(std::uint32_t s, std::size_t slot, MF rejected) {
-    const std::size_t bit = s * kSlots + slot;
-    flags_[bit / 64] |= std::uint64_t{!hn::AllFalse(DF(), rejected)} << (bit % 64);
-  }
-
-  /// Queues the rejected lanes of the flagged slots for the slow path.
-  HWY_NOINLINE void queue_rejected() {
-    // The count in a local: stores through the queue's arrays could alias a member.
-    std::size_t count = queue_->count;
-    for (std::size_t w = 0; w < kFlagWords; ++w) {
-      for (std::uint64_t f = flags_[w]; f != 0; f &= f - 1) {
-        const std::size_t bit = w * 64 + hwy::Num0BitsBelowLS1Bit_Nonzero64(f);
-        const std::size_t s = bit / kSlots, slot = bit % kSlots;
-        Rejects& q = *queue_;
-        const std::uint64_t first = static_cast<std::uint64_t>(&z_[s][slot][0] - &z_[0][0][0]);
-        // Lane by lane (they are few: cheaper than compressing whole vectors), one loop over the
-        // row's kK mask bytes read as one word: bit 8 k + i is lane k kN + i.
-        std::uint64_t row = 0;
-        std::memcpy(&row, &rejected_[s][slot][0], kK);
-        for (; row != 0; row &= row - 1) {
-          const std::size_t pos = hwy::Num0BitsBelowLS1Bit_Nonzero64(row);
-          const std::size_t j = (pos / 8) * kN + pos % 8;
-          std::memcpy(&q.bits[count], &z_[s][slot][j], sizeof(double));  // the candidate
-          q.at[count] = first + j;
-          ++count;
-        }
-        if (HWY_UNLIKELY(count + kBlock > Rejects::kCapacity)) {
-          queue_->count = count;
-          drain();
-          count = queue_->count;
-        }
-      }
-      flags_[w] = 0;
+  /// The normals of streams tag[0..T) at samples 4 quad .. 4 quad + 3 into slots slot[0..T) of
+  /// chunk samples s .. s+3; only samples s+from .. s+to-1 are written. The T streams' Philox
+  /// draws run interleaved.
+  template <std::size_t T>
+  HWY_INLINE void draw_normals(std::uint32_t quad, const std::uint32_t (&tag)[T], const std::size_t (&slot)[T],
+                               std::uint32_t s, std::uint32_t from, std::uint32_t to) {
+    Words w[T * kK];
+    for (std::size_t t = 0; t < T; ++t) {
+      for (std::size_t k = 0; k < kK; ++k) w[t * kK + k] = {splat_u(quad), splat_u(tag[t]), run_lo_[k], run_hi_[k]};
     }
-    queue_->count = count;
+    philox(w, keys_);
+    for (std::size_t t = 0; t < T; ++t) store_normals(&w[t * kK], slot[t], s, from, to);
   }
 
-  /// Sample n's normals into chunk sample s: the wheels' and the leg's effect draws.
-  HWY_INLINE void draw_sample(const Leg& leg, std::uint32_t n, std::uint32_t s) {
-    Words w[kK];
-    draw(n, random::kTagWheelNoise, w);
-    MF left = normal(candidate(w[0].w0, w[0].w1), 0, s, 0);
-    MF right = normal(candidate(w[0].w2, w[0].w3), 0, s, 1);
-    for (std::size_t k = 1; k < kK; ++k) {
-      left = hn::Or(left, normal(candidate(w[k].w0, w[k].w1), k, s, 0));
-      right = hn::Or(right, normal(candidate(w[k].w2, w[k].w3), k, s, 1));
+  /// The normals of one stream's words (kK vectors of a quad's draw) into slot `slot`.
+  HWY_INLINE void store_normals(const Words* w, std::size_t slot, std::uint32_t s, std::uint32_t from,
+                                std::uint32_t to) {
+#if HWY_TARGET == HWY_SCALAR
+    std::uint32_t words[4 * kK];
+    float z[4 * kK];
+    for (std::size_t k = 0; k < kK; ++k) {
+      words[4 * k] = static_cast<std::uint32_t>(hn::GetLane(w[k].w0));
+      words[4 * k + 1] = static_cast<std::uint32_t>(hn::GetLane(w[k].w1));
+      words[4 * k + 2] = static_cast<std::uint32_t>(hn::GetLane(w[k].w2));
+      words[4 * k + 3] = static_cast<std::uint32_t>(hn::GetLane(w[k].w3));
     }
-    flag(s, 0, left);
-    flag(s, 1, right);
-    if constexpr (kGeneral) {
-      tags_[s] = plan_.draw_tags.data() + leg.draws_begin;
-      for (std::uint32_t d = leg.draws_begin; d < leg.draws_end; ++d) {
-        const std::size_t slot = 2 + d - leg.draws_begin;
-        draw(n, plan_.draw_tags[d], w);
-        MF any = normal(candidate(w[0].w0, w[0].w1), 0, s, slot);
-        for (std::size_t k = 1; k < kK; ++k) any = hn::Or(any, normal(candidate(w[k].w0, w[k].w1), k, s, slot));
-        flag(s, slot, any);
+    random::normals_from_words(words, z);
+    for (std::size_t k = 0; k < kK; ++k) {
+      for (std::uint32_t j = from; j < to; ++j) z_[slot][k][s + j][0] = z[4 * k + j];
+    }
+#else
+    const DF32 d;
+    VecOps::F z[2 * kK];
+    quad_normals(w, z);
+    for (std::size_t k = 0; k < kK; ++k) {
+      float* out = &z_[slot][k][s][0];
+      if (HWY_LIKELY(from == 0 && to == 4)) {
+        hn::Store(z[2 * k], d, out);
+        hn::Store(z[2 * k + 1], d, out + 2 * kN);
+      } else {  // a quad the leg shares with its neighbour: only the leg's samples
+        alignas(64) float quad_z[4 * kN];
+        hn::Store(z[2 * k], d, quad_z);
+        hn::Store(z[2 * k + 1], d, quad_z + 2 * kN);
+        std::memcpy(out + from * kN, quad_z + from * kN, (to - from) * kN * sizeof(float));
       }
     }
+#endif
   }
 
-  /// The slow path of every queued candidate: attempt by attempt, N candidates per vector, the
-  /// rejected ones queued again for their next attempt.
-  HWY_NOINLINE void drain() {
-    while (queue_->count > 0) {
-      Rejects& in = *queue_;
-      Rejects& out = queue_ == &rejects_[0] ? rejects_[1] : rejects_[0];
-      out.count = 0;
-      for (std::size_t i = 0; i < in.count; i += kBlock) attempt(in, i, out);
-      in.count = 0;
-      queue_ = &out;
-    }
-  }
-
-  /// One attempt on queued candidates i .. i+kBlock-1 (branch-free but for the rare tail).
-  HWY_INLINE void attempt(Rejects& in, std::size_t i, Rejects& out) {
-    const std::size_t c = in.count - i < kBlock ? in.count - i : kBlock;
-    const std::size_t vectors = (c + kN - 1) / kN, lanes = vectors * kN;
-    for (std::size_t j = c; j < lanes; ++j) in.bits[i + j] = in.bits[i], in.at[i + j] = in.at[i];
-    alignas(64) std::uint64_t run[kBlock], sample[kBlock], tag[kBlock], next[kBlock];
-    alignas(64) double z[kBlock], state[kBlock];
-    for (std::size_t j = 0; j < lanes; ++j) {
-      const std::uint64_t at = in.at[i + j];
-      const std::uint64_t index = at & 0xFFFFFFFFu, q = index / kBlock;
-      const std::size_t slot = q % kSlots, s = q / kSlots;
-      run[j] = first_ + index % kBlock;
-      sample[j] = n0_ + s;
-      tag[j] = retry_base(s, slot) | ((at >> 32) + 1) << random::kRetryShift;
-    }
-    zig_attempt(vectors, in.bits + i, run, sample, tag, keys_, z, next, state);
-    double* zs = &z_[0][0][0];
-    std::size_t count = out.count;  // a local: the stores below could alias the member
-    for (std::size_t j = 0; j < c; ++j) {
-      const std::uint64_t at = in.at[i + j] + (std::uint64_t{1} << 32);  // one more attempt
-      zs[at & 0xFFFFFFFFu] = z[j];  // meaningful when accepted, rewritten otherwise
-      out.bits[count] = next[j];
-      out.at[count] = at;
-      const bool retry = state[j] == 0.0 && (at >> 32) < random::kMaxRetries;
-      count += retry ? 1 : 0;
-      if (HWY_UNLIKELY(state[j] == 2.0 || (state[j] == 0.0 && !retry))) {
-        // The tail (and an exhausted budget, which throws) by the scalar method.
-        const std::uint32_t k = static_cast<std::uint32_t>(tag[j] >> random::kRetryShift);
-        zs[at & 0xFFFFFFFFu] = random::zig_slow(
-            in.bits[i + j], key_, run[j], static_cast<std::uint32_t>(sample[j]),
-            static_cast<std::uint32_t>(tag[j]) & ((1u << random::kRetryShift) - 1), k);
-      }
-    }
-    out.count = count;
-  }
-
-  /// The retry tag of slot `slot` of chunk sample s's normals.
-  std::uint32_t retry_base(std::size_t s, std::size_t slot) const {
-    if constexpr (kGeneral) {
-      if (slot >= 2) return tags_[s][slot - 2];
-    }
-    (void)s;
-    return random::kTagWheelRetry + static_cast<std::uint32_t>(slot);
+  /// The normal in slot `slot` of chunk sample s for vector k.
+  HWY_INLINE VF normal(std::size_t slot, std::size_t k, std::uint32_t s) const {
+    return hn::PromoteTo(DF(), hn::Load(DH32(), &z_[slot][k][s][0]));
   }
 
   /// Sample n's step from the normals of chunk sample s; `leg` is the path's (its operations),
@@ -537,11 +415,10 @@ class Block {
   template <class L>
   HWY_INLINE void step_sample(Pose<VF> (&p)[kK], const Leg& leg, const L& legs, std::uint32_t n,
                               std::uint32_t s) {
-    const DF df;
     VF noise_l[kK], noise_r[kK];
     for (std::size_t k = 0; k < kK; ++k) {
-      noise_l[k] = legs.sigma_left(k) * hn::Load(df, &z_[s][0][k * kN]);
-      noise_r[k] = legs.sigma_right(k) * hn::Load(df, &z_[s][1][k * kN]);
+      noise_l[k] = legs.sigma_left(k) * normal(0, k, s);
+      noise_r[k] = legs.sigma_right(k) * normal(1, k, s);
     }
     if constexpr (kGeneral) effects(leg, legs, n, s, noise_l, noise_r);
     for (std::size_t k = 0; k < kK; ++k) step(p[k], legs, k, noise_l[k], noise_r[k]);
@@ -555,22 +432,45 @@ class Block {
     const VF eps = (noise_r - noise_l) * leg.inv_two_b(k);
     const VF ds = leg.center(k) + c(0.5) * (noise_l + noise_r);
     const VF e2 = eps * eps;
-    const VF se = sin_taylor(eps, e2, c);
-    const VF ce = cos_taylor(e2, c);
-    const VF ch = leg.cos_half(k) * ce - leg.sin_half(k) * se;
-    const VF sh = leg.sin_half(k) * ce + leg.cos_half(k) * se;
     const VF h = leg.half(k) + eps;
-    MF special = hn::Gt(hn::Abs(eps), c(arc::kEpsTaylorMax));
-    VF sinc;
+    // The reference's rule (arc::step): the short series where the leg takes them and eps and h
+    // are within their bounds, else the long ones; a lane outside every series bound is special.
+    const MF in_short = hn::And(hn::Le(hn::Abs(eps), c(arc::kEpsShortMax)),
+                                hn::Le(hn::Abs(h), c(arc::kSincShortMax)));
+    VF se, ce, ch, sh, sinc;
+    MF special;
     if constexpr (L::kPerLane) {
-      // Each lane takes the reference's own choice (the series within its bound).
-      sinc = hn::IfThenElse(hn::Le(hn::Abs(h), c(arc::kSincSeriesMax)), sinc_series(h * h, c), sh / h);
-    } else if (leg.leg.series_sinc) {
-      sinc = sinc_series(h * h, c);
-      special = hn::Or(special, hn::Gt(hn::Abs(h), c(arc::kSincSeriesMax)));
+      // Each lane its own leg's choice.
+      const MF use_short = hn::And(leg.short_series(k), in_short);
+      se = hn::IfThenElse(use_short, sin_short(eps, e2, c), sin_taylor(eps, e2, c));
+      ce = hn::IfThenElse(use_short, cos_short(e2, c), cos_taylor(e2, c));
+      ch = leg.cos_half(k) * ce - leg.sin_half(k) * se;
+      sh = leg.sin_half(k) * ce + leg.cos_half(k) * se;
+      const VF h2 = h * h;
+      sinc = hn::IfThenElse(use_short, sinc_short(h2, c),
+                            hn::IfThenElse(hn::Le(hn::Abs(h), c(arc::kSincSeriesMax)),
+                                           sinc_series(h2, c), sh / h));
+      special = hn::AndNot(use_short, hn::Gt(hn::Abs(eps), c(arc::kEpsTaylorMax)));
+    } else if (leg.leg.short_series) {
+      se = sin_short(eps, e2, c);
+      ce = cos_short(e2, c);
+      ch = leg.cos_half(k) * ce - leg.sin_half(k) * se;
+      sh = leg.sin_half(k) * ce + leg.cos_half(k) * se;
+      sinc = sinc_short(h * h, c);
+      special = hn::Not(in_short);
     } else {
-      sinc = sh / h;
-      special = hn::Or(special, hn::Le(hn::Abs(h), c(arc::kSincSeriesMax)));
+      se = sin_taylor(eps, e2, c);
+      ce = cos_taylor(e2, c);
+      ch = leg.cos_half(k) * ce - leg.sin_half(k) * se;
+      sh = leg.sin_half(k) * ce + leg.cos_half(k) * se;
+      special = hn::Gt(hn::Abs(eps), c(arc::kEpsTaylorMax));
+      if (leg.leg.series_sinc) {
+        sinc = sinc_series(h * h, c);
+        special = hn::Or(special, hn::Gt(hn::Abs(h), c(arc::kSincSeriesMax)));
+      } else {
+        sinc = sh / h;
+        special = hn::Or(special, hn::Le(hn::Abs(h), c(arc::kSincSeriesMax)));
+      }
     }
     if (HWY_LIKELY(hn::AllFalse(DF(), special))) {
       // A lane without slip in a vector with some takes advance_lateral with lat = 0, whose side
@@ -655,8 +555,8 @@ class Block {
     const DF df;
     VF zl[kK], zr[kK], extra_l[kK], extra_r[kK];
     for (std::size_t k = 0; k < kK; ++k) {
-      zl[k] = hn::Load(df, &z_[s][0][k * kN]);
-      zr[k] = hn::Load(df, &z_[s][1][k * kN]);
+      zl[k] = normal(0, k, s);
+      zr[k] = normal(1, k, s);
       extra_l[k] = extra_r[k] = splat(0.0);
     }
     for (const NoiseMix& m : plan_.mixes) {
@@ -671,9 +571,10 @@ class Block {
         continue;
       }
       VF(&extra)[kK] = op.wheel == 0 ? extra_l : extra_r;
-      const double* values = op.per_run ? &values_[op.effect][op.index][0] : &z_[s][2 + op.index][0];
       for (std::size_t k = 0; k < kK; ++k) {
-        extra[k] = extra[k] + (hn::Load(df, values + k * kN) * splat(op.a)) * splat(op.b);
+        const VF value = op.per_run ? hn::Load(df, &values_[op.effect][op.index][k * kN])
+                                    : normal(2 + op.index, k, s);
+        extra[k] = extra[k] + (value * splat(op.a)) * splat(op.b);
       }
     }
     for (std::size_t k = 0; k < kK; ++k) {
@@ -728,15 +629,9 @@ class Block {
   const std::uint64_t first_;
   VU run_[kK], run_lo_[kK], run_hi_[kK];
   Pose<VF> p_[kK];
-  Rejects rejects_[2];  // the slow path's queue and the next attempts', in turns
-  Rejects* queue_ = &rejects_[0];
-  std::uint32_t n0_ = 0;  // the chunk's first sample
-  // Normals of the chunk; until the slow path has run, a rejected lane's candidate bits.
-  alignas(64) double z_[kChunk][kSlots][kBlock];
-  std::uint8_t rejected_[kChunk][kSlots][kK];  // lanes the fast path rejected, a bit each
-  static constexpr std::size_t kFlagWords = (kChunk * kSlots + 63) / 64;
-  std::uint64_t flags_[kFlagWords] = {};  // (sample, slot) pairs with rejected lanes
-  const std::uint32_t* tags_[kChunk] = {};                    // general: their legs' draw tags
+  // Normals of the chunk in single precision, [slot][vector][sample][lane]: a quad's two vectors
+  // of floats are contiguous, and a sample's kN lanes are what the step promotes to doubles.
+  alignas(64) float z_[kSlots][kK][kChunk][kN];
   // The general kernel's per-run values, structure of arrays: [effect][value][lane].
   alignas(64) double values_[kGeneral ? kMaxEffects : 1][4][kBlock];
   // Per-lane legs: the table of the leg built last (a member array only where it is used).
@@ -745,6 +640,38 @@ class Block {
   LegTable lane_legs_;
   const Leg* built_ = nullptr;
 };
+
+/// The normals of `count` words as the kernel computes them (lane_plan.hpp's NormalsFn): groups
+/// of 2 kK vectors of floats, as draw_normals converts a quad of samples.
+inline void normals_of_words(const std::uint32_t* words, std::size_t count, float* out) {
+#if HWY_TARGET == HWY_SCALAR
+  constexpr std::size_t kGroup = 16;
+  for (std::size_t i = 0; i < count; i += kGroup) {
+    const std::size_t n = count - i < kGroup ? count - i : kGroup;
+    std::uint32_t in[kGroup];
+    float z[kGroup];
+    for (std::size_t j = 0; j < kGroup; ++j) in[j] = words[i + (j < n ? j : 0)];
+    random::normals_from_words(in, z);
+    std::memcpy(out + i, z, n * sizeof(float));
+  }
+#else
+  const DF32 d;
+  const DI32 di;
+  constexpr std::size_t kL = hn::MaxLanes(DF32()), kGroup = 2 * kK * kL;
+  alignas(64) std::int32_t in[kGroup];
+  alignas(64) float z_out[kGroup];
+  for (std::size_t i = 0; i < count; i += kGroup) {
+    const std::size_t n = count - i < kGroup ? count - i : kGroup;
+    for (std::size_t j = 0; j < kGroup; ++j) in[j] = static_cast<std::int32_t>(words[i + (j < n ? j : 0)]);
+    VecOps::I w[2 * kK];
+    VecOps::F z[2 * kK];
+    for (std::size_t v = 0; v < 2 * kK; ++v) w[v] = hn::Load(di, in + v * kL);
+    normal_icdf<VecOps, 2 * kK>(w, z);
+    for (std::size_t v = 0; v < 2 * kK; ++v) hn::Store(z[v], d, z_out + v * kL);
+    std::memcpy(out + i, z_out, n * sizeof(float));
+  }
+#endif
+}
 
 /// The kernel entry point (lane_plan.hpp's KernelFn): blocks of kBlock runs; the last block's
 /// lanes past `count` are simulated and dropped.

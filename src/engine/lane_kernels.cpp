@@ -15,7 +15,9 @@
 HWY_BEFORE_NAMESPACE();
 namespace odomcov::lanes::HWY_NAMESPACE {
 
-Target describe() { return {hwy::TargetName(HWY_TARGET), HWY_TARGET, kN, kBlock, &run_blocks}; }
+Target describe() {
+  return {hwy::TargetName(HWY_TARGET), HWY_TARGET, kN, kBlock, &run_blocks, &normals_of_words};
+}
 
 }  // namespace odomcov::lanes::HWY_NAMESPACE
 HWY_AFTER_NAMESPACE();

@@ -33,6 +33,7 @@ BuiltLeg make_leg(std::int64_t count, const ArcSegment& increment, const effects
   leg.sigma_right = std::sqrt(variance.y());
   leg.inv_two_b = 1.0 / (2.0 * wheelbase_true);
   leg.series_sinc = std::abs(leg.half_rad) <= arc::kSincSeriesMax;
+  leg.short_series = arc::short_series_for(leg.half_rad, leg.sigma_left, leg.sigma_right, leg.inv_two_b);
   leg.event_travel = 0.5 * (std::abs(increment.left_m) + std::abs(increment.right_m));
   leg.lateral_m = sys.lateral * leg.event_travel;
   b.view = {increment.left_m, increment.right_m, robot.wheelbase_m,
@@ -224,14 +225,20 @@ EndPose reference_run(const Plan& plan, const random::Philox::key_type& key, std
     plan.stochastic[i]->begin_run(fx.states[i], fx.draws[i]);
   }
   std::uint32_t n = 0;
+  float quad[8] = {};  // the wheels' normals of the quad of samples n belongs to: left, right
   Leg this_run;  // a leg rebuilt for this run's draws (per_run_legs)
   for (std::size_t l = 0; l < plan.legs.size(); ++l) {
     if (plan.per_run_legs()) this_run = run_leg(plan, l, fx.states.data());
     const Leg& leg = plan.per_run_legs() ? this_run : plan.legs[l];
     for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
-      const random::Bits128 b = random::draw(key, run, n, random::kTagWheelNoise);
-      double zl = random::normal(b.lo, key, run, n, random::kTagWheelRetry + 0);
-      double zr = random::normal(b.hi, key, run, n, random::kTagWheelRetry + 1);
+      if ((n & 3) == 0) {  // a quad's words: the wheels' next four samples
+        const random::Philox::ctr_type l = random::draw4(key, run, n >> 2, random::kTagWheelLeft);
+        const random::Philox::ctr_type r = random::draw4(key, run, n >> 2, random::kTagWheelRight);
+        const std::uint32_t words[8] = {l[0], l[1], l[2], l[3], r[0], r[1], r[2], r[3]};
+        random::normals_from_words(words, quad);
+      }
+      double zl = quad[n & 3];
+      double zr = quad[4 + (n & 3)];
       double noise_l = 0.0, noise_r = 0.0;
       if (plan.general()) {
         std::array<double, 2> extra{};

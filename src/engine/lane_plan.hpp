@@ -104,6 +104,10 @@ inline constexpr std::size_t kMaxRuns = 64;
 /// The most per-sample normals one leg draws for its effects.
 inline constexpr std::size_t kMaxDraws = 8;
 
+/// The normals of `count` words (random::normal_from_word, every word in turn), as a target
+/// computes them: tests and bench/normal_icdf_accuracy hold each target to the scalar bits.
+using NormalsFn = void (*)(const std::uint32_t* words, std::size_t count, float* out);
+
 /// One compiled instruction set's kernel.
 struct Target {
   const char* name;
@@ -111,6 +115,7 @@ struct Target {
   std::size_t lanes;     // doubles per vector
   std::size_t block;     // runs advanced in lock step
   KernelFn run;
+  NormalsFn normals;
 };
 
 /// Every target compiled into this build (best first) that this CPU supports.
