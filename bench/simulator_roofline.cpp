@@ -137,7 +137,7 @@ HWY_NOINLINE double part_inreg(const Plan& plan, const random::Philox::key_type&
         Words w[kK];
         block.draw(q, tag, w);
         VecOps::F z[2 * kK];
-        quad_normals(w, z);
+        quad_normals<kK>(w, z);
         for (std::size_t k = 0; k < 2 * kK; ++k) sink = sink + z[k];
       }
     }

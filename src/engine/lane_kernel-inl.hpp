@@ -46,10 +46,10 @@ using MF = hn::Mask<DF>;
 inline constexpr std::size_t kN = hn::MaxLanes(DF());
 inline constexpr std::size_t kK = kN >= 8 ? 4 : kN >= 4 ? 2 : 4;
 inline constexpr std::size_t kBlock = kN * kK;
-/// Whether the two wheels' Philox draws of a quad run interleaved (2 kK chains): where one
-/// wheel's kK chains leave the vector units waiting for a round's latency (AVX2's 2 chains: its
-/// plain kernel 3-7% faster together, simulator_roofline A/B), not with AVX-512's 4, whose 8
-/// spill registers (7% slower together).
+/// Whether the two wheels' Philox draws and normals of a quad run interleaved (2 kK chains, 4 kK
+/// vectors of normals): where one wheel's leave the vector units waiting for a round's or a
+/// polynomial step's latency (AVX2's 2 chains: its plain kernel 10-15% faster together,
+/// simulator_roofline A/B), not with AVX-512's 4, whose 8 spill registers (7% slower together).
 inline constexpr bool kWheelsTogether = kBlock < 32;
 static_assert(kBlock <= kMaxRuns, "a block must fit the kernel's output");
 static_assert(kN <= 8 && kK <= 8, "a vector's mask must fit a byte, a row's a word");
@@ -155,15 +155,16 @@ HWY_INLINE VecOps::I pack(VU lo, VU hi) {
   return hn::ConcatEven(d, hn::BitCast(d, hi), hn::BitCast(d, lo));
 }
 
-/// The normals of a quad's draw for the block's kK vectors: z[2k] samples 0 and 1 of vector k's
-/// runs, z[2k + 1] samples 2 and 3.
-HWY_INLINE void quad_normals(const Words* w, VecOps::F (&z)[2 * kK]) {
-  VecOps::I words[2 * kK];
-  for (std::size_t k = 0; k < kK; ++k) {
+/// The normals of C vectors of a quad's draws: z[2k] samples 0 and 1 of vector k's runs,
+/// z[2k + 1] samples 2 and 3.
+template <std::size_t C>
+HWY_INLINE void quad_normals(const Words* w, VecOps::F (&z)[2 * C]) {
+  VecOps::I words[2 * C];
+  for (std::size_t k = 0; k < C; ++k) {
     words[2 * k] = pack(w[k].w0, w[k].w1);
     words[2 * k + 1] = pack(w[k].w2, w[k].w3);
   }
-  normal_icdf<VecOps, 2 * kK>(words, z);
+  normal_icdf<VecOps, 2 * C>(words, z);
 }
 #endif
 
@@ -358,7 +359,7 @@ class Block {
 
   /// The normals of streams tag[0..T) at samples 4 quad .. 4 quad + 3 into slots slot[0..T) of
   /// chunk samples s .. s+3; only samples s+from .. s+to-1 are written. The T streams' Philox
-  /// draws run interleaved.
+  /// draws, and their normals, run interleaved.
   template <std::size_t T>
   HWY_INLINE void draw_normals(std::uint32_t quad, const std::uint32_t (&tag)[T], const std::size_t (&slot)[T],
                                std::uint32_t s, std::uint32_t from, std::uint32_t to) {
@@ -367,39 +368,39 @@ class Block {
       for (std::size_t k = 0; k < kK; ++k) w[t * kK + k] = {splat_u(quad), splat_u(tag[t]), run_lo_[k], run_hi_[k]};
     }
     philox(w, keys_);
-    for (std::size_t t = 0; t < T; ++t) store_normals(&w[t * kK], slot[t], s, from, to);
-  }
-
-  /// The normals of one stream's words (kK vectors of a quad's draw) into slot `slot`.
-  HWY_INLINE void store_normals(const Words* w, std::size_t slot, std::uint32_t s, std::uint32_t from,
-                                std::uint32_t to) {
 #if HWY_TARGET == HWY_SCALAR
-    std::uint32_t words[4 * kK];
-    float z[4 * kK];
-    for (std::size_t k = 0; k < kK; ++k) {
-      words[4 * k] = static_cast<std::uint32_t>(hn::GetLane(w[k].w0));
-      words[4 * k + 1] = static_cast<std::uint32_t>(hn::GetLane(w[k].w1));
-      words[4 * k + 2] = static_cast<std::uint32_t>(hn::GetLane(w[k].w2));
-      words[4 * k + 3] = static_cast<std::uint32_t>(hn::GetLane(w[k].w3));
-    }
-    random::normals_from_words(words, z);
-    for (std::size_t k = 0; k < kK; ++k) {
-      for (std::uint32_t j = from; j < to; ++j) z_[slot][k][s + j][0] = z[4 * k + j];
+    for (std::size_t t = 0; t < T; ++t) {
+      std::uint32_t words[4 * kK];
+      float z[4 * kK];
+      for (std::size_t k = 0; k < kK; ++k) {
+        const Words& v = w[t * kK + k];
+        words[4 * k] = static_cast<std::uint32_t>(hn::GetLane(v.w0));
+        words[4 * k + 1] = static_cast<std::uint32_t>(hn::GetLane(v.w1));
+        words[4 * k + 2] = static_cast<std::uint32_t>(hn::GetLane(v.w2));
+        words[4 * k + 3] = static_cast<std::uint32_t>(hn::GetLane(v.w3));
+      }
+      random::normals_from_words(words, z);
+      for (std::size_t k = 0; k < kK; ++k) {
+        for (std::uint32_t j = from; j < to; ++j) z_[slot[t]][k][s + j][0] = z[4 * k + j];
+      }
     }
 #else
     const DF32 d;
-    VecOps::F z[2 * kK];
-    quad_normals(w, z);
-    for (std::size_t k = 0; k < kK; ++k) {
-      float* out = &z_[slot][k][s][0];
-      if (HWY_LIKELY(from == 0 && to == 4)) {
-        hn::Store(z[2 * k], d, out);
-        hn::Store(z[2 * k + 1], d, out + 2 * kN);
-      } else {  // a quad the leg shares with its neighbour: only the leg's samples
-        alignas(64) float quad_z[4 * kN];
-        hn::Store(z[2 * k], d, quad_z);
-        hn::Store(z[2 * k + 1], d, quad_z + 2 * kN);
-        std::memcpy(out + from * kN, quad_z + from * kN, (to - from) * kN * sizeof(float));
+    VecOps::F z[2 * T * kK];
+    quad_normals<T * kK>(w, z);
+    for (std::size_t t = 0; t < T; ++t) {
+      for (std::size_t k = 0; k < kK; ++k) {
+        const VecOps::F z01 = z[2 * (t * kK + k)], z23 = z[2 * (t * kK + k) + 1];
+        float* out = &z_[slot[t]][k][s][0];
+        if (HWY_LIKELY(from == 0 && to == 4)) {
+          hn::Store(z01, d, out);
+          hn::Store(z23, d, out + 2 * kN);
+        } else {  // a quad the leg shares with its neighbour: only the leg's samples
+          alignas(64) float quad_z[4 * kN];
+          hn::Store(z01, d, quad_z);
+          hn::Store(z23, d, quad_z + 2 * kN);
+          std::memcpy(out + from * kN, quad_z + from * kN, (to - from) * kN * sizeof(float));
+        }
       }
     }
 #endif
