@@ -476,8 +476,8 @@ TEST(Diagnose, ANestedRicherCandidateMustFitSignificantlyBetter) {
   // delta BIC (its extra parameter gains more than ln(runs)/2 in log-likelihood) but that gain
   // is not significant at the per-candidate level (Wilks, 1 dof), the simpler effect must be
   // adopted in its place. The lab of tests/data/worlds/nested_wheelbase.yaml (a blind world on
-  // which a plain wheelbase error once drew that case, p = 0.016; with today's random stream its
-  // seed no longer does, nor do seeds 1-160) is given a turn dependence too small for its runs
+  // which a plain wheelbase error once drew that case, p = 0.016; with the random stream of
+  // 2026-12 its seed no longer does, nor do seeds 1-160) is given a turn dependence too small for its runs
   // to show at the family-wise level (Eb_arc 1.0038 against Eb_spin 1.0045), so that the extra
   // gain falls between the two thresholds in some seeds: on each of 8 seeds, either the richer
   // effect does not rank first, or its extra gain is significant and it is adopted, or it is
@@ -648,7 +648,7 @@ TEST(Calibrate, TheStandardLabEndToEnd) {
   // only through their heading noise, whose posterior mean is a draw about the truth and which
   // a half circle doubles), so the 60 runs' mean NEES does not average it away. Its calibration
   // is tested over 200 worlds, one run each (Design.APredictionCarriesWhatItsTrainingCouldNotSize).
-  // (Under the random stream before 2026-12 this lab gave 2.3-3.8; under today's its sized
+  // (Under the random stream before 2026-12 this lab gave 2.3-3.8; under that of 2026-12 its sized
   // posterior puts the offset's dy at -6.7 mm, 2.4 posterior sd from the truth, and the arcs'
   // NEES at 7.6.) The training has no arcs, so it cannot size a wheelbase that differs on arcs;
   // that is said.

@@ -2,7 +2,8 @@
 // lane_kernels.cpp; the roofline harness in bench/ includes it too). A block of runs advances in
 // lock step, run j of the block in lane j, structure of arrays: K vectors of N doubles each.
 //
-// Per sample and lane it does exactly what the scalar reference (simulator.cpp) does per run:
+// Per sample and lane it does exactly what the scalar reference (lane_plan.cpp, reference_run)
+// does per run:
 //   * Philox4x32-10 at counter (sample / 4, tag, run lo, run hi), with the four 32-bit words held
 //     in 64-bit lanes (the 32x32 -> 64 multiply is MulEven; the upper half of a word may hold
 //     garbage between rounds because MulEven reads only the lower half, so no masking per round);
@@ -36,7 +37,6 @@ namespace hn = hwy::HWY_NAMESPACE;
 
 using DF = hn::ScalableTag<double>;
 using DU = hn::RebindToUnsigned<DF>;
-using DI = hn::RebindToSigned<DF>;
 using DU32 = hn::Repartition<std::uint32_t, DF>;
 using VF = hn::Vec<DF>;
 using VU = hn::Vec<DU>;
@@ -52,7 +52,6 @@ inline constexpr std::size_t kBlock = kN * kK;
 /// simulator_roofline A/B), not with AVX-512's 4, whose 8 spill registers (7% slower together).
 inline constexpr bool kWheelsTogether = kBlock < 32;
 static_assert(kBlock <= kMaxRuns, "a block must fit the kernel's output");
-static_assert(kN <= 8 && kK <= 8, "a vector's mask must fit a byte, a row's a word");
 
 HWY_INLINE VF splat(double c) { return hn::Set(DF(), c); }
 

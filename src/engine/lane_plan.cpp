@@ -232,9 +232,9 @@ EndPose reference_run(const Plan& plan, const random::Philox::key_type& key, std
     const Leg& leg = plan.per_run_legs() ? this_run : plan.legs[l];
     for (std::int64_t i = 0; i < leg.count; ++i, ++n) {
       if ((n & 3) == 0) {  // a quad's words: the wheels' next four samples
-        const random::Philox::ctr_type l = random::draw4(key, run, n >> 2, random::kTagWheelLeft);
-        const random::Philox::ctr_type r = random::draw4(key, run, n >> 2, random::kTagWheelRight);
-        const std::uint32_t words[8] = {l[0], l[1], l[2], l[3], r[0], r[1], r[2], r[3]};
+        const random::Philox::ctr_type left = random::draw4(key, run, n >> 2, random::kTagWheelLeft);
+        const random::Philox::ctr_type right = random::draw4(key, run, n >> 2, random::kTagWheelRight);
+        const std::uint32_t words[8] = {left[0], left[1], left[2], left[3], right[0], right[1], right[2], right[3]};
         random::normals_from_words(words, quad);
       }
       double zl = quad[n & 3];
