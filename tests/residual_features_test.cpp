@@ -407,15 +407,21 @@ TEST(Verdict, ConstantNoiseLevelIsNotAdoptedForNoiseThatGrowsWithSpeed) {
   if (d.best) std::cout << "  adopted: " << d.candidates[*d.best].effect << "\n";
   EXPECT_FALSE(d.explained);
   // The noise correlation gains in-sample and in all held out, but predicts one kind of path
-  // worse by more than kMaxFoldLoss: a compromise between kinds, a mimic.
+  // worse by more than kMaxFoldLoss and significantly (fold_loss_bound): a compromise between
+  // kinds, a mimic.
   const auto correlation = std::find_if(d.candidates.begin(), d.candidates.end(),
                                         [](const Candidate& c) { return c.effect == "wheel_noise_correlation"; });
   ASSERT_NE(correlation, d.candidates.end());
   EXPECT_TRUE(correlation->significant);
   EXPECT_EQ(correlation->verdict, "mimic");
   EXPECT_EQ(correlation->rule, "held-out likelihood");
+  const auto tested = static_cast<std::size_t>(
+      std::count_if(correlation->held_out_by_fold.begin(), correlation->held_out_by_fold.end(),
+                    [](const Candidate::FoldGain& g) { return g.counted; }));
   EXPECT_TRUE(std::any_of(correlation->held_out_by_fold.begin(), correlation->held_out_by_fold.end(),
-                          [](const Candidate::FoldGain& g) { return g.counted && g.gain < -kMaxFoldLoss; }));
+                          [&](const Candidate::FoldGain& g) {
+                            return g.counted && g.gain < -fold_loss_bound(g, correlation->mean_dispersion, tested);
+                          }));
   EXPECT_NE(correlation->decision.find("is a mimic"), std::string::npos) << correlation->decision;
 }
 
@@ -457,8 +463,11 @@ TEST(Verdict, WheelbaseImitatingASpeedScaleIsStoppedByTheScatterItLeaves) {
 // noise-only labs and the rule stops it in 5 (dispersed p 0.02-0.20; seed 9, p = 0.0013, is
 // adopted: a mimic in 1 lab of 30), and speed on the scatter comes first in all 30; with the
 // true scale error the rule never stops it (dispersed p <= 1.1e-4 in all 30) and it is adopted
-// in 25 (in the other 5 one kind of path held out loses more than kMaxFoldLoss: a mimic by the
-// held-out rule). The test takes seed 2 and seed 1, the first of each case.
+// in all 30 (25 before the held-out rule judged a fold's loss against the spread of its runs'
+// gains: in the other 5 one kind of path held out lost more than kMaxFoldLoss, and it was called
+// a mimic; measured again by odomcov synth and diagnose --effects scale_error, which give the
+// noise-only lab the same outcome with and without that change). The test takes seed 2 and seed
+// 1, the first of each case.
 TEST(Verdict, ASecondOrderMeanOfSpeedNoiseIsNotAScaleError) {
   WorldFile noise = load_world(kSource + "/tests/data/worlds/speed_noise_second_order.yaml");
   noise.seed = 2;
@@ -512,6 +521,31 @@ TEST(Verdict, AFoldLossIsJudgedAgainstTheDispersionTheModelLeaves) {
   EXPECT_TRUE(spin->counted);
   EXPECT_LT(spin->gain, -kMaxFoldLoss);  // a mimic by the unscaled rule
   EXPECT_GE(spin->gain, -kMaxFoldLoss * ratio.mean_dispersion);
+}
+
+// The held-out rule against the sampling spread of a fold's gain (docs/calibrate.md, "Selection
+// by prediction"). In a lab whose wheel diameter ratio varies between days
+// (tests/data/worlds/group_ed_spread_spin_loss.yaml, a blind world the rule failed on), the true
+// spread between the days predicts the held-out lines, arcs and squares far better but the spins
+// a little worse, by more than kMaxFoldLoss: as much as it loses on them in-sample, and within
+// the scatter of the spins' runs' gains. That is noise, not a worse prediction: it is adopted,
+// not called a mimic (which left a fixed diameter ratio named in its place).
+TEST(Verdict, AFoldLossWithinTheSpreadOfItsRunsGainsIsNoise) {
+  const Suite s = lab({kSource + "/tests/data/worlds/group_ed_spread_spin_loss.yaml"});
+  const Diagnosis d = diagnose(s, suite_model(s));
+  ASSERT_TRUE(d.best.has_value());
+  const Candidate& spread = d.candidates[*d.best];
+  std::cout << "  " << spread.effect << ": " << spread.verdict << "; " << spread.decision << "\n";
+  EXPECT_EQ(spread.effect, "group_variation(wheel_diameter_ratio.Ed)");
+  const auto spin = std::find_if(spread.held_out_by_fold.begin(), spread.held_out_by_fold.end(),
+                                 [](const Candidate::FoldGain& g) { return g.fold == "spin"; });
+  ASSERT_NE(spin, spread.held_out_by_fold.end());
+  std::cout << "  spins held out: " << spin->gain << ", spread " << spin->spread << " over " << spin->parts
+            << " runs\n";
+  EXPECT_TRUE(spin->counted);
+  EXPECT_LT(spin->gain, -kMaxFoldLoss);  // a mimic by the rule without the spread
+  EXPECT_GT(spin->gain, -2.0 * spin->spread);
+  EXPECT_EQ(spin->parts, 83U);  // the runs of its seven days' 14 spins
 }
 
 // In this lab every run starts from rest and stops once at one speed, so its acceleration feature

@@ -43,7 +43,8 @@ json decision_json(const Candidate& c) {
   for (const Candidate::FoldGain& g : c.held_out_by_fold) {
     folds.push_back({{"fold", g.fold}, {"gain", g.gain}, {"stderr_ratio", finite_or_null(g.stderr_ratio)},
                      {"signal", g.signal}, {"counted", g.counted}, {"contradicts", g.contradicts},
-                     {"model_stderr_ratio", finite_or_null(g.model_stderr_ratio)}, {"undetermined", g.undetermined}});
+                     {"model_stderr_ratio", finite_or_null(g.model_stderr_ratio)}, {"undetermined", g.undetermined},
+                     {"spread", finite_or_null(g.spread)}});
   }
   return {{"exact", c.exact},
           {"delta_mean_log_likelihood", finite_or_null(c.delta_mean_log_likelihood)},

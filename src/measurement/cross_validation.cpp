@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <numeric>
 
 #include "odomcov/base/format.hpp"
 
@@ -126,6 +127,36 @@ FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& s
 double held_out_log_likelihood(const std::vector<std::vector<RunResidual>>& all,
                                const std::vector<bool>& training, Likelihood kind) {
   return log_likelihood_of(all, kind) - log_likelihood_of(select_experiments(all, training), kind);
+}
+
+std::vector<double> held_out_parts(const std::vector<std::vector<RunResidual>>& all,
+                                   const std::vector<bool>& training, Likelihood kind) {
+  // The training experiments first, then the held-out ones: each held-out run's density is then
+  // the one given every training run and the held-out runs before it, and their sum is
+  // log L(all) - log L(training) whatever the order of the held-out runs.
+  std::vector<std::vector<RunResidual>> ordered;
+  std::size_t held_runs = 0;
+  for (const bool train : {true, false}) {
+    for (std::size_t e = 0; e < all.size(); ++e) {
+      if (training[e] != train) continue;
+      ordered.push_back(all[e]);
+      if (!train) held_runs += all[e].size();
+    }
+  }
+  std::vector<double> values = run_log_likelihoods(ordered, kind == Likelihood::scatter);
+  values.erase(values.begin(), values.end() - static_cast<std::ptrdiff_t>(held_runs));
+  return values;
+}
+
+double spread_of_sum(const std::vector<double>& parts) {
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  const std::size_t n = parts.size();
+  if (n < 2) return kNaN;
+  const double mean = std::accumulate(parts.begin(), parts.end(), 0.0) / static_cast<double>(n);
+  double ss = 0.0;
+  for (double d : parts) ss += (d - mean) * (d - mean);
+  const double spread = std::sqrt(ss * static_cast<double>(n) / static_cast<double>(n - 1));
+  return std::isfinite(spread) ? spread : kNaN;
 }
 
 }  // namespace odomcov

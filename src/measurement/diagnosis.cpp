@@ -5,10 +5,12 @@
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <boost/math/distributions/normal.hpp>
+#include <boost/math/distributions/students_t.hpp>
 #include <cmath>
-#include <limits>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
+#include <numeric>
 #include <utility>
 
 #include "odomcov/base/format.hpp"
@@ -658,8 +660,12 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
     const StderrRatio model = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, 0, first_own, true);
     Candidate::FoldGain g;
     g.fold = folds.names[f];
-    g.gain = held_out_log_likelihood(judged(c, b, on_mean), training, t.kind) -
-             held_out_log_likelihood(b, training, t.kind);
+    std::vector<double> parts = held_out_parts(judged(c, b, on_mean), training, t.kind);
+    const std::vector<double> base_parts = held_out_parts(b, training, t.kind);
+    for (std::size_t i = 0; i < parts.size(); ++i) parts[i] -= base_parts[i];
+    g.gain = std::accumulate(parts.begin(), parts.end(), 0.0);
+    g.spread = spread_of_sum(parts);
+    g.parts = parts.size();
     g.stderr_ratio = own.ratio;
     g.signal = signal[f];
     g.model_stderr_ratio = model.ratio;
@@ -681,13 +687,15 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
   t.c.delta_held_out = any ? total : kNaN;
 }
 
-/// "a (-12.3) and b (+4.1)": the counted folds, worst first, at most `most`.
+/// "a (-12.3 ± 2.1), b (+4.1 ± 1.5)": the counted folds' gains with their spreads, worst first,
+/// at most `most`.
 std::string worst_folds(std::vector<Candidate::FoldGain> gains, std::size_t most) {
   std::sort(gains.begin(), gains.end(), [](const auto& a, const auto& b) { return a.gain < b.gain; });
   std::string text;
   for (const Candidate::FoldGain& g : gains) {
     if (!g.counted || most == 0) continue;
-    text += (text.empty() ? "" : ", ") + g.fold + " (" + format_number(g.gain, "%+.3g") + ")";
+    text += (text.empty() ? "" : ", ") + g.fold + " (" + format_number(g.gain, "%+.3g") +
+            (std::isfinite(g.spread) ? " ± " + format_number(g.spread, "%.2g") : std::string()) + ")";
     --most;
   }
   return text;
@@ -1052,9 +1060,11 @@ bool passes_held_out(Round& round, Trial& t) {
   // A fold's loss is on the quasi-likelihood's scale: where the experiments' means scatter phi
   // times as much as the model predicts (mean_dispersion, a systematic candidate's), a loss of
   // phi kMaxFoldLoss weighs what kMaxFoldLoss would under a right covariance [McCullagh89, §9.3].
-  const double phi = std::isfinite(c.mean_dispersion) ? std::max(1.0, c.mean_dispersion) : 1.0;
+  const double phi = std::isfinite(c.mean_dispersion) ? c.mean_dispersion : 1.0;
+  const auto tested = static_cast<std::size_t>(std::count_if(c.held_out_by_fold.begin(), c.held_out_by_fold.end(),
+                                                              [](const Candidate::FoldGain& g) { return g.counted; }));
   const bool loses_a_fold = std::any_of(c.held_out_by_fold.begin(), c.held_out_by_fold.end(), [&](const Candidate::FoldGain& g) {
-    return (g.counted && g.gain < -kMaxFoldLoss * phi) || g.contradicts;
+    return (g.counted && g.gain < -fold_loss_bound(g, phi, tested)) || g.contradicts;
   });
   if (c.delta_held_out <= 0 || loses_a_fold) return stop(c, "mimic", "held-out likelihood", mimic_text(t, *used));
   if (judged_on_mean(t, c.model)) {
@@ -1114,21 +1124,15 @@ bool judge(Round& round, Trial& t, double per_candidate, const ModelSummary& bef
 }
 
 /// Vuong's statistic for two non-nested fitted candidates on their part of the likelihood
-/// [Vuong89]: z = sum d_i / (sqrt(n) sd(d)), d_i the runs' log-likelihood differences (Welford
-/// for the variance). Near 0 when the likelihood cannot tell the two apart.
+/// [Vuong89]: z = sum d_i / (sqrt(n) sd(d)), d_i the runs' log-likelihood differences
+/// (spread_of_sum). Near 0 when the likelihood cannot tell the two apart.
 double vuong_z(const Round& round, const Trial& a, const Trial& b) {
   const bool scatter = a.kind == Likelihood::scatter;
-  const std::vector<double> la = run_log_likelihoods(round.cache.at(a.c.model), scatter);
+  std::vector<double> d = run_log_likelihoods(round.cache.at(a.c.model), scatter);
   const std::vector<double> lb = run_log_likelihoods(round.cache.at(b.c.model), scatter);
-  double mean = 0.0, m2 = 0.0;
-  for (std::size_t i = 0; i < la.size(); ++i) {
-    const double d = la[i] - lb[i], delta = d - mean;
-    mean += delta / static_cast<double>(i + 1);
-    m2 += delta * (d - mean);
-  }
-  const double n = static_cast<double>(la.size());
-  const double sd = n > 1 ? std::sqrt(m2 / (n - 1)) : 0.0;
-  return sd > 0 ? mean * std::sqrt(n) / sd : (mean == 0.0 ? 0.0 : std::copysign(kInfinity, mean));
+  for (std::size_t i = 0; i < d.size(); ++i) d[i] -= lb[i];
+  const double sum = std::accumulate(d.begin(), d.end(), 0.0), spread = spread_of_sum(d);
+  return spread > 0 ? sum / spread : (sum == 0.0 ? 0.0 : std::copysign(kInfinity, sum));
 }
 
 /// True when the likelihood cannot tell two fitted candidates apart: |Vuong z| below the
@@ -1361,6 +1365,14 @@ std::vector<Trial> fit_trials(Round& round, const std::vector<CandidateType>& ty
 }
 
 }  // namespace
+
+double fold_loss_bound(const Candidate::FoldGain& gain, double phi, std::size_t tested) {
+  const double scaled = kMaxFoldLoss * std::max(1.0, phi);
+  if (!std::isfinite(gain.spread)) return scaled;
+  const boost::math::students_t t(static_cast<double>(gain.parts - 1));
+  const double level = kFoldLossAlpha / static_cast<double>(std::max<std::size_t>(tested, 1));
+  return std::max(scaled, boost::math::quantile(boost::math::complement(t, level)) * gain.spread);
+}
 
 double contradiction_bound(double stderr_ratio, int dof) {
   const boost::math::chi_squared chi2(std::max(1, dof));

@@ -80,6 +80,19 @@ FoldFits fit_folds(ResidualCache& cache, const Folds& folds, const SuiteModel& s
 double held_out_log_likelihood(const std::vector<std::vector<RunResidual>>& all,
                                const std::vector<bool>& training, Likelihood kind);
 
+/// held_out_log_likelihood in its parts, one per held-out run, which sum to it. Of the full
+/// likelihood, a run's density given the training runs and the held-out runs before it (the
+/// chain rule: under the model the parts are uncorrelated, even within a group); of the scatter
+/// part, a run's deviation from its experiment's mean (n runs' deviations correlate by
+/// -1/(n - 1), their squares by order 1/n^2).
+std::vector<double> held_out_parts(const std::vector<std::vector<RunResidual>>& all,
+                                   const std::vector<bool>& training, Likelihood kind);
+
+/// The sampling standard deviation of a sum of n independent parts, estimated from their
+/// scatter: sqrt(n s^2), s^2 their sample variance (the studentised log-likelihood ratio of
+/// [Vuong89]). NaN for fewer than 2 parts or a non-finite part.
+double spread_of_sum(const std::vector<double>& parts);
+
 /// The log-likelihood of the kind asked for: the full one or its scatter part.
 double log_likelihood_of(const std::vector<std::vector<RunResidual>>& residuals, Likelihood kind);
 
