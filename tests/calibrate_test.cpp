@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <numeric>
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/normal.hpp>
 #include <cmath>
@@ -114,6 +115,34 @@ TEST(CrossValidation, HeldOutLikelihoodOfIndependentRunsIsTheirOwnDensity) {
     }
     EXPECT_NEAR(held_out_log_likelihood(all, training, Likelihood::full), held, 1e-9 * std::abs(held)) << folds.names[f];
   }
+}
+
+TEST(CrossValidation, HeldOutPartsSumToTheHeldOutLikelihoodWithinGroups) {
+  // With a spread between groups the held-out runs are not independent of the training runs of
+  // their group: each part is a run's density given the runs before it (the chain rule), and the
+  // parts of every fold sum to log L(all) - log L(training), for both parts of the likelihood.
+  Suite lab = test::synth_suite(load_world(kStandard), "cv_parts");
+  for (std::size_t i = 0; i < lab.experiments.size(); ++i) lab.experiments[i].group = i % 2 == 0 ? "day-1" : "day-2";
+  SuiteModel model = suite_model(lab);
+  model.effects.push_back({"scale_error", {1.002}});
+  model.effects.push_back({kGroupVariation, {0.002}, "scale_error.Es"});
+  const std::vector<std::vector<RunResidual>> all = residuals(lab, model);
+  const Folds folds = make_folds(lab);
+  ASSERT_GE(folds.size(), 2u);
+  for (const Likelihood kind : {Likelihood::full, Likelihood::scatter}) {
+    for (std::size_t f = 0; f < folds.size(); ++f) {
+      const std::vector<bool> training = folds.training(f);
+      const std::vector<double> parts = held_out_parts(all, training, kind);
+      std::size_t held_runs = 0;
+      for (std::size_t e = 0; e < all.size(); ++e) held_runs += training[e] ? 0 : all[e].size();
+      EXPECT_EQ(parts.size(), held_runs) << folds.names[f];
+      const double held = held_out_log_likelihood(all, training, kind);
+      EXPECT_NEAR(std::accumulate(parts.begin(), parts.end(), 0.0), held, 1e-9 * std::abs(held)) << folds.names[f];
+    }
+  }
+  // The spread of a sum of parts: sqrt(n) times their sample standard deviation.
+  EXPECT_DOUBLE_EQ(spread_of_sum({1.0, 2.0, 3.0, 4.0}), std::sqrt(4.0 * 5.0 / 3.0));
+  EXPECT_TRUE(std::isnan(spread_of_sum({1.0})));
 }
 
 TEST(CrossValidation, AViewAndTheWholeSuiteShareOnePropagation) {

@@ -76,8 +76,8 @@ inline constexpr double kMaxFoldLoss = 2.0;
 /// gain, one-sided at this family-wise level over the folds (fold_loss_bound): the gain is a sum
 /// over the fold's runs, and a loss that the scatter of their gains explains is noise, not a
 /// worse prediction (a true spread between groups, fitted on every run, lost 3.9 on 14 spins,
-/// 1.4 times the spread of their runs' gains). The studentised sum is Vuong's statistic [Vuong89], as a
-/// one-sided test of "the candidate predicts the fold no worse than the base".
+/// 1.4 times the spread of their runs' gains). The studentised sum is Vuong's statistic
+/// [Vuong89], as a one-sided test of "the candidate predicts the fold no worse than the base".
 inline constexpr double kFoldLossAlpha = 0.05;
 
 /// A fold that holds nearly all the information about a candidate (stderr_ratio r > 3) is not
