@@ -18,9 +18,9 @@
 
 #include "odomcov/measurement/calibration.hpp"
 #include "odomcov/measurement/diagnosis.hpp"
-#include "odomcov/io/optiodom.hpp"
 #include "odomcov/io/world.hpp"
 #include "odomcov/io/suite_io.hpp"
+#include "synth_util.hpp"
 
 namespace odomcov {
 namespace {
@@ -37,27 +37,6 @@ Suite synth_suite(const WorldFile& w, const std::string& tag) {
     std::ofstream(dir / (w.experiments[i].name + ".csv")) << measurements_csv(synthesize(w, i));
   }
   std::ofstream(dir / "suite.yaml") << suite_yaml(w);
-  Suite s = load_suite((dir / "suite.yaml").string());
-  fs::remove_all(dir);
-  return s;
-}
-
-/// The OptiOdom square sessions of data/optiodom (real runs with logged encoders), imported
-/// as `odomcov import optiodom data/optiodom/data/diff/square/* --wheelbase 0.2
-/// --diameters 0.084,0.084` would.
-Suite optiodom_squares() {
-  OptiOdomOptions o;
-  for (const auto& session : fs::directory_iterator(ODOMCOV_SOURCE_DIR "/data/optiodom/data/diff/square")) {
-    o.sessions.push_back(session.path().string());
-  }
-  std::sort(o.sessions.begin(), o.sessions.end());
-  o.wheelbase_m = 0.2;
-  o.diameters_m = {{0.084, 0.084}};
-  const auto dir = fs::temp_directory_path() / ("odomcov_fast_oo_" + std::to_string(::getpid()));
-  for (const ImportedFile& f : import_optiodom(o)) {
-    fs::create_directories((dir / f.path).parent_path());
-    std::ofstream(dir / f.path) << f.text;
-  }
   Suite s = load_suite((dir / "suite.yaml").string());
   fs::remove_all(dir);
   return s;
@@ -90,7 +69,7 @@ TEST(FastPath, FitMatchesExactOnASyntheticSuite) {
 }
 
 TEST(FastPath, FitMatchesExactOnOptiOdomSquares) {
-  const Suite squares = optiodom_squares();
+  const Suite squares = test::optiodom_suite({"square"}, "fast");
   ASSERT_GE(squares.experiments.size(), 10u);
   expect_same_fit(squares, suite_model(squares), {"wheel_diameter_ratio.Ed", "wheelbase_error.Eb"},
                   Likelihood::full);

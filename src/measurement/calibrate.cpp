@@ -1,9 +1,13 @@
 #include "odomcov/measurement/calibrate.hpp"
 
 #include <algorithm>
+#include <Eigen/Cholesky>
 #include <boost/math/distributions/chi_squared.hpp>
 #include <cmath>
+#include <limits>
 #include <map>
+#include <optional>
+#include <tuple>
 
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/cross_validation.hpp"
@@ -84,6 +88,153 @@ void simplify_nested(const Suite& suite, const CalibrateOptions& options, Diagno
       out.loop_model = with_simple.model;
       break;
     }
+  }
+}
+
+/// The specs that one named entry of the loop put into the model (indices into `model.effects`),
+/// empty when it cannot be taken out alone: a robot candidate (wheel_noise_level), an effect a
+/// group_variation varies, or an effect of the starting model. A group candidate's entry holds its
+/// group_variation and, unless another entry or the start has it, the effect it varies (which the
+/// candidate added at its neutral value).
+std::vector<std::size_t> specs_of_entry(const SuiteModel& model, const SuiteModel& start,
+                                        const std::vector<std::string>& named, const std::string& entry) {
+  const auto index = [&](const std::string& name, const std::string& target) -> std::optional<std::size_t> {
+    for (std::size_t i = 0; i < model.effects.size(); ++i) {
+      if (model.effects[i].name == name && model.effects[i].target == target) return i;
+    }
+    return std::nullopt;
+  };
+  const auto in_start = [&](const std::string& name) { return find_spec(start.effects, name) != nullptr; };
+  const std::string group_prefix = std::string(kGroupVariation) + "(";
+  if (entry.rfind(group_prefix, 0) == 0 && entry.back() == ')') {
+    const std::string target = entry.substr(group_prefix.size(), entry.size() - group_prefix.size() - 1);
+    const std::optional<std::size_t> group = index(kGroupVariation, target);
+    if (!group || in_start(kGroupVariation)) return {};
+    std::vector<std::size_t> out{*group};
+    const std::string varied = target.substr(0, target.find('.'));
+    const std::optional<std::size_t> v = index(varied, "");
+    if (v && !in_start(varied) && std::find(named.begin(), named.end(), varied) == named.end()) out.push_back(*v);
+    return out;
+  }
+  const std::optional<std::size_t> i = index(entry, "");
+  if (!i || in_start(entry) || varied_by_group(model, entry)) return {};
+  return {*i};
+}
+
+/// The catalogue's (or a custom effect's) description of the fit name "<effect>.<parameter>" of
+/// one of `model`'s effects; nullptr for a robot parameter.
+const EffectParameterInfo* parameter_info(const SuiteModel& model, const std::string& name) {
+  const std::size_t dot = name.find('.');
+  const EffectSpec* spec = dot == std::string::npos ? nullptr : find_spec(model.effects, name.substr(0, dot));
+  const EffectInfo* info = spec ? info_of(*spec) : nullptr;
+  if (!info) return nullptr;
+  for (const EffectParameterInfo& p : info->parameters) {
+    if (p.name == name.substr(dot + 1)) return &p;
+  }
+  return nullptr;
+}
+
+/// True when every one of `names` does nothing at the closed lower edge of its range: the
+/// likelihood ratio for taking them out is then a 50:50 chi^2 mixture [Self87].
+bool removal_on_boundary(const SuiteModel& model, const std::vector<std::string>& names) {
+  return std::all_of(names.begin(), names.end(), [&](const std::string& n) {
+    const EffectParameterInfo* p = parameter_info(model, n);
+    return p && p->neutral == p->lower && !p->open_lower;
+  });
+}
+
+/// The Wald statistic of `names` in `fit` against their neutral values (from the fit's
+/// covariance); NaN when the covariance does not give one (singular, not finite).
+double wald_statistic(const FitResult& fit, const std::vector<std::string>& names) {
+  constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  const auto n = static_cast<Eigen::Index>(names.size());
+  if (fit.covariance.rows() != static_cast<Eigen::Index>(fit.names.size())) return kNone;
+  Eigen::VectorXd delta(n);
+  std::vector<Eigen::Index> at;
+  for (const std::string& name : names) {
+    const auto it = std::find(fit.names.begin(), fit.names.end(), name);
+    const EffectParameterInfo* p = parameter_info(fit.model, name);
+    if (it == fit.names.end() || !p) return kNone;
+    at.push_back(static_cast<Eigen::Index>(it - fit.names.begin()));
+    delta(static_cast<Eigen::Index>(at.size() - 1)) = fit.values(at.back()) - p->neutral;
+  }
+  const Eigen::MatrixXd cov = fit.covariance(at, at);
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(cov);
+  if (!cov.allFinite() || ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all()) return kNone;
+  return delta.dot(ldlt.solve(delta));
+}
+
+/// The test of taking one named entry out of the loop's model (drop_unsupported).
+struct Removal {
+  double p = -1.0;      // the likelihood ratio's p-value; -1 when it stays without one
+  double delta = 0.0;   // what it gains in log-likelihood, the rest refitted
+  FitResult without;    // the model without it, refitted
+};
+
+/// Whether entry `entry` of out.named passes its test (p = -1) or not: `with` is the loop's model
+/// fitted jointly.
+Removal test_removal(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
+                     DiagnoseProgress* progress, ResidualCache& cache, const CalibrateResult& out,
+                     const FitResult& with, const std::string& entry, double level) {
+  const bool noise = named_noise_level(out.named);
+  std::vector<std::size_t> specs = specs_of_entry(out.loop_model, start, out.named, entry);
+  std::sort(specs.rbegin(), specs.rend());  // erased from the back
+  SuiteModel without = out.loop_model;
+  for (std::size_t i : specs) without.effects.erase(without.effects.begin() + static_cast<std::ptrdiff_t>(i));
+  const std::vector<std::string> kept = joint_parameters(without, noise);
+  std::vector<std::string> removed;
+  for (const std::string& n : with.names) {
+    if (std::find(kept.begin(), kept.end(), n) == kept.end()) removed.push_back(n);
+  }
+  Removal r;
+  if (specs.empty() || removed.empty()) return r;
+  const bool on_boundary = removal_on_boundary(out.loop_model, removed);
+  const int dof = static_cast<int>(removed.size());
+  const double wald = wald_statistic(with, removed);
+  if (std::isfinite(wald) && lrt_p_value(0.5 * wald, dof, on_boundary) < level) return r;
+  if (kept.empty()) {  // nothing left to fit: the model without it as it is
+    r.without.model = without;
+    r.without.log_likelihood_after = log_likelihood(cache.at(without));
+  } else {
+    r.without = fit_all(suite, without, noise, options, progress, cache);
+  }
+  if (!r.without.at_bound.empty()) return r;
+  r.delta = with.log_likelihood_after - r.without.log_likelihood_after;
+  r.p = lrt_p_value(r.delta, dof, on_boundary);
+  return r;
+}
+
+/// The backward step after the rounds: each round adopted its effect against the model of its
+/// round, and an effect adopted later may explain what an earlier one took up (a per-run radius
+/// adopted for the spread of bumps before the bumps were in). With every other effect refitted,
+/// an adopted effect must still pass the test that admitted it: the likelihood ratio for it,
+/// significant at the last round's per-candidate level (alpha over its candidates). The least
+/// supported one that fails (largest p) is taken out, the rest refitted, and the check repeats.
+/// The fits are screened by the Wald test of the joint fit: an effect whose parameters it finds
+/// significant at the level stays without a fit of the model without it; one whose Wald test
+/// does not (or that has no covariance) is fitted without it, and taken out only when the
+/// likelihood ratio agrees and the fit without it ends at no bound. Both tests are on the full
+/// likelihood, the joint fit's, on which a random effect's variance also takes up part of any
+/// misfit of the means: that can keep a random effect in, never take a needed one out.
+void drop_unsupported(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
+                      DiagnoseProgress* progress, ResidualCache& cache, CalibrateResult& out) {
+  if (out.rounds.empty()) return;
+  const double level = options.diagnose.alpha / static_cast<double>(std::max<std::size_t>(1, out.rounds.back().candidates.size()));
+  while (!out.named.empty()) {
+    const FitResult with = fit_all(suite, out.loop_model, named_noise_level(out.named), options, progress, cache);
+    std::size_t worst = 0;
+    Removal best;
+    for (std::size_t k = 0; k < out.named.size(); ++k) {
+      Removal r = test_removal(suite, start, options, progress, cache, out, with, out.named[k], level);
+      if (r.p >= level && r.p > best.p) std::tie(worst, best) = std::forward_as_tuple(k, std::move(r));
+    }
+    if (best.p < 0.0) return;
+    const std::string gain = best.delta > 0.0 ? "only " + format_number(best.delta, "%.3g") : std::string("nothing");
+    out.simplified.push_back(out.named[worst] + " taken out: with every other effect refitted it gains " + gain +
+                             " in log-likelihood (likelihood ratio p = " + format_number(best.p, "%.2g") +
+                             ", not significant at " + format_number(level, "%.2g") + ")");
+    out.named.erase(out.named.begin() + static_cast<std::ptrdiff_t>(worst));
+    out.loop_model = best.without.model;
   }
 }
 
@@ -462,6 +613,7 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
   run_rounds(suite, start, options, progress, cache, out);
   if (progress && progress->cancel.load()) throw Cancelled();
   simplify_nested(suite, options, progress, cache, out);
+  drop_unsupported(suite, start, options, progress, cache, out);
   joint_fit(suite, options, progress, cache, out);
   account(suite, options, progress, cache, out);
   out.model.domain = training_domain(suite, out.model.robot.wheelbase_m);

@@ -18,6 +18,12 @@
 #include "odomcov/measurement/residual_features.hpp"
 
 namespace odomcov {
+
+double lrt_p_value(double delta, int dof, bool on_boundary) {
+  const double lr = std::max(0.0, 2.0 * delta);
+  return lr == 0.0 ? 1.0 : (on_boundary ? 0.5 : 1.0) * chi2_sf(lr, dof);
+}
+
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -356,12 +362,6 @@ Round start_round(const Suite& suite, const SuiteModel& model, const Comparison&
   return round;
 }
 
-/// The p-value of a likelihood-ratio gain `delta` (in log-likelihood) with `dof` parameters:
-/// chi^2, halved on the boundary [Self87].
-double lrt_p_value(double delta, int dof, bool on_boundary) {
-  const double lr = std::max(0.0, 2.0 * delta);
-  return lr == 0.0 ? 1.0 : (on_boundary ? 0.5 : 1.0) * chi2_sf(lr, dof);
-}
 
 /// The p-value of a gain `delta` in the mean with `dof` parameters under the dispersion `d`:
 /// the likelihood ratio when phi is 1, else the quasi-likelihood F = (2 delta/dof)/phi ~

@@ -130,9 +130,11 @@ struct StandIn {
 struct CalibrateResult {
   std::vector<Diagnosis> rounds;
   /// The adopted candidates, in order; an effect the final nested check replaced by a simpler
-  /// one it contains (`simplified`) under the simpler one's name.
+  /// one it contains (`simplified`) under the simpler one's name, and without those the check
+  /// after the rounds took out (the other effects made them unnecessary).
   std::vector<std::string> named;
-  /// The final nested check's replacements, in words (after the rounds, before the joint fit).
+  /// What the checks after the rounds did, in words (before the joint fit): the nested check's
+  /// replacements, then the effects taken out.
   std::vector<std::string> simplified;
   SuiteModel loop_model;           // the model after the last adoption (everything refitted)
   /// The joint fit of every fitted parameter of the final model's effects (and the wheel

@@ -204,6 +204,10 @@ struct Candidate {
   std::string confounded_with;
 };
 
+/// The p-value of a likelihood-ratio gain `delta` (in log-likelihood) with `dof` parameters:
+/// chi^2, halved on the boundary [Self87].
+double lrt_p_value(double delta, int dof, bool on_boundary);
+
 /// The loss beyond which a counted fold is predicted worse: kMaxFoldLoss times the candidate's
 /// mean dispersion `phi` (at least 1), and the gain's spread (when it has one) times the
 /// one-sided point of Student's t with parts - 1 degrees of freedom at kFoldLossAlpha / tested,
