@@ -47,6 +47,7 @@ json decision_json(const Candidate& c) {
                      {"spread", finite_or_null(g.spread)}});
   }
   return {{"exact", c.exact},
+          {"tails_scale", c.tails_scale},
           {"delta_mean_log_likelihood", finite_or_null(c.delta_mean_log_likelihood)},
           {"mean_p_value", finite_or_null(c.mean_p_value)},
           {"mean_dispersion", finite_or_null(c.mean_dispersion)},

@@ -40,9 +40,8 @@ class Bumps final : public Effect {
       to_next += -std::log(1.0 - draws.uniform(sample, i + 2)) / rate_;
     }
   }
-  std::string non_gaussian() const override {
-    return rate_ > 0 && sigma_ > 0 ? "Poisson impulses (heavy tails)" : "";
-  }
+  std::string non_gaussian() const override { return heavy_tailed() ? "Poisson impulses (heavy tails)" : ""; }
+  bool heavy_tailed() const override { return rate_ > 0 && sigma_ > 0; }
   std::string check_samples(double max_mean_travel_m) const override {
     const double per_sample = rate_ * max_mean_travel_m;
     if (per_sample <= kMaxMeanBumpsPerSample) return "";

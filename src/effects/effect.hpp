@@ -269,6 +269,10 @@ class Effect {
   /// makes the errors it gives non-Gaussian ("a radius drawn once per run"): compare then
   /// calibrates its tests by simulating the model's world (non_gaussian_effect).
   virtual std::string non_gaussian() const { return ""; }
+  /// World side: true when the errors it gives have heavier tails than Gaussian ones (a few runs
+  /// far out: Poisson impulses), so that a Gaussian likelihood's ratio for a variance parameter
+  /// is no longer chi^2 (heavy_tailed_effect; diagnose scales it).
+  virtual bool heavy_tailed() const { return false; }
 
   // ---- Model side (first order in the effect) ------------------------------------------------
   /// Number of standard-normal per-run constants this effect contributes columns for.

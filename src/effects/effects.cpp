@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 
 #include "effects/effect.hpp"
@@ -275,6 +276,11 @@ std::string non_gaussian_effect(const EffectList& list) {
     if (std::string why = objects[i]->non_gaussian(); !why.empty()) return list[i].name + ": " + why;
   }
   return "";
+}
+
+bool heavy_tailed_effect(const EffectList& list) {
+  const auto objects = effects::instantiate(list);
+  return std::any_of(objects.begin(), objects.end(), [](const auto& e) { return e->heavy_tailed(); });
 }
 
 FitCoordinate fit_coordinate(const EffectParameterInfo& p) {

@@ -215,7 +215,8 @@ Removal test_removal(const Suite& suite, const SuiteModel& start, const Calibrat
 /// does not (or that has no covariance) is fitted without it, and taken out only when the
 /// likelihood ratio agrees and the fit without it ends at no bound. Both tests are on the full
 /// likelihood, the joint fit's, on which a random effect's variance also takes up part of any
-/// misfit of the means: that can keep a random effect in, never take a needed one out.
+/// misfit of the means, and whose ratio for a variance is not scaled for heavy tails as diagnose's
+/// is (tails_scale): both can keep a random effect in, never take a needed one out.
 void drop_unsupported(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
                       DiagnoseProgress* progress, ResidualCache& cache, CalibrateResult& out) {
   if (out.rounds.empty()) return;

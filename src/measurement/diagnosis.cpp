@@ -463,6 +463,30 @@ void confounding(const FitResult& fit, std::size_t first, Candidate& c) {
   }
 }
 
+/// The factor by which heavy tails inflate a random candidate's likelihood ratio. The Gaussian
+/// likelihood's ratio for a variance parameter is chi^2 only when the errors are Gaussian: its
+/// score's variance grows with their kurtosis, and the ratio is then about c chi^2 with c the
+/// sandwich variance of the estimate over the observed information's [Kent82] (the
+/// Satorra-Bentler scaling, c the mean over the candidate's parameters). A mean parameter's
+/// score does not depend on the kurtosis, so a systematic candidate keeps 1; so does every
+/// candidate of a round whose errors are not heavy-tailed (neither against the model by the
+/// kurtosis test nor in the model's own world: heavy_tailed_effect); c is never taken below 1.
+double tails_scale(const Round& round, const Trial& t) {
+  const bool gaussian = !round.heavy_tails && !heavy_tailed_effect(round.base.effects);
+  if (gaussian || t.type->systematic || t.fit.robust_stderrs.size() != t.fit.stderrs.size()) return 1.0;
+  const Eigen::Index own = static_cast<Eigen::Index>(t.type->fitted.size());
+  const Eigen::Index first = static_cast<Eigen::Index>(t.fit.names.size()) - own;
+  double sum = 0.0;
+  Eigen::Index counted = 0;
+  for (Eigen::Index k = first; k < first + own; ++k) {
+    const double naive = t.fit.stderrs(k), robust = t.fit.robust_stderrs(k);
+    if (!(std::isfinite(naive) && std::isfinite(robust) && naive > 0.0)) continue;
+    sum += (robust * robust) / (naive * naive);
+    ++counted;
+  }
+  return counted == 0 ? 1.0 : std::max(1.0, sum / static_cast<double>(counted));
+}
+
 /// Judges a fitted candidate in-sample: delta log-likelihood on its part of the likelihood,
 /// delta BIC, p-value, the gain in the mean (systematic, not grouped), its reported parameters
 /// and where it showed most.
@@ -487,7 +511,8 @@ void judge_in_sample(const Round& round, Trial& t, double log_runs) {
   // otherwise also "explain" any mean misfit). The gains are on one scale; delta BIC ranks.
   c.delta_log_likelihood = t.fit.log_likelihood_after - (c.systematic ? round.base_full : round.base_scatter);
   c.delta_bic = -2.0 * c.delta_log_likelihood + c.dof * log_runs;
-  c.p_value = lrt_p_value(c.delta_log_likelihood, c.dof, type.on_boundary);
+  c.tails_scale = tails_scale(round, t);
+  c.p_value = lrt_p_value(c.delta_log_likelihood / c.tails_scale, c.dof, type.on_boundary);
   describe_fit(round.suite, type, static_cast<Eigen::Index>(t.fitted.size() - type.fitted.size()), se, c);
   const auto& candidate_residuals = round.cache.at(c.model);
   c.delta_full_log_likelihood = log_likelihood(candidate_residuals) - round.base_full;

@@ -276,6 +276,10 @@ void check_effects(const EffectList& list);
 /// decides"). Throws EffectError for an invalid list.
 std::string non_gaussian_effect(const EffectList& list);
 
+/// True when an effect of the list gives errors with heavier tails than Gaussian ones on the
+/// world side (bumps at a size where they act). Throws EffectError for an invalid list.
+bool heavy_tailed_effect(const EffectList& list);
+
 /// The spec as a YAML list entry, e.g. "- wheel_diameter_ratio: {Ed: 1.0041}" or
 /// "- group_variation: {parameter: wheelbase_error.Eb, sd: 0.002}", or for a custom effect its
 /// whole definition with the current values as starting values, on one line.

@@ -124,6 +124,10 @@ struct Candidate {
   double delta_full_log_likelihood = 0.0;  // the gain in the full likelihood, for reference
   double delta_bic = 0.0;             // -2 dLL + (free parameters) ln(runs): < 0 favours it
   double p_value = 1.0;  // likelihood ratio, chi^2 (boundary: 1/2 chi^2 mixture)
+  /// What the ratio was divided by before p_value: a random candidate's sandwich variance over
+  /// its observed information's where the errors are heavy-tailed, else 1 (docs/calibrate.md,
+  /// "Significance under heavy tails").
+  double tails_scale = 1.0;
   int dof = 0;
   bool significant = false;
   /// The experiments whose likelihood rose most, with the rise: where the effect showed.
