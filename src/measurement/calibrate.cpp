@@ -171,8 +171,9 @@ struct Removal {
   FitResult without;    // the model without it, refitted
 };
 
-/// Whether entry `entry` of out.named passes its test (p = -1) or not: `with` is the loop's model
-/// fitted jointly.
+/// The test of taking `entry` (of out.named) out of the loop's model, `with` that model fitted
+/// jointly: p = -1 when it stays without a fit (the Wald test finds it, it cannot be taken out
+/// alone, or the fit without it ends at a bound), else the likelihood ratio's p-value.
 Removal test_removal(const Suite& suite, const SuiteModel& start, const CalibrateOptions& options,
                      DiagnoseProgress* progress, ResidualCache& cache, const CalibrateResult& out,
                      const FitResult& with, const std::string& entry, double level) {

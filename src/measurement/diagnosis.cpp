@@ -362,7 +362,6 @@ Round start_round(const Suite& suite, const SuiteModel& model, const Comparison&
   return round;
 }
 
-
 /// The p-value of a gain `delta` in the mean with `dof` parameters under the dispersion `d`:
 /// the likelihood ratio when phi is 1, else the quasi-likelihood F = (2 delta/dof)/phi ~
 /// F(dof, d.dof) [McCullagh89, §9.3]; halved on the boundary [Self87].
@@ -466,8 +465,8 @@ void confounding(const FitResult& fit, std::size_t first, Candidate& c) {
 /// The factor by which heavy tails inflate a random candidate's likelihood ratio. The Gaussian
 /// likelihood's ratio for a variance parameter is chi^2 only when the errors are Gaussian: its
 /// score's variance grows with their kurtosis, and the ratio is then about c chi^2 with c the
-/// sandwich variance of the estimate over the observed information's [Kent82] (the
-/// Satorra-Bentler scaling, c the mean over the candidate's parameters). A mean parameter's
+/// sandwich variance of the estimate over the observed information's [Kent82] (for several
+/// parameters, c their mean: the ratio scaled to its mean). A mean parameter's
 /// score does not depend on the kurtosis, so a systematic candidate keeps 1; so does every
 /// candidate of a round whose errors are not heavy-tailed (neither against the model by the
 /// kurtosis test nor in the model's own world: heavy_tailed_effect); c is never taken below 1.
