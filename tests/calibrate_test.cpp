@@ -14,6 +14,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <utility>
 
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/domain.hpp"
@@ -46,6 +47,17 @@ SuiteExperiment experiment(const std::string& name, const std::string& kind, con
   ex.kind = kind;
   ex.group = group;
   return ex;
+}
+
+/// The standard lab recorded on two days (alternate experiments), and a model whose scale error
+/// varies between them.
+std::pair<Suite, SuiteModel> two_day_scale_lab(const std::string& tag) {
+  Suite lab = test::synth_suite(load_world(kStandard), tag);
+  for (std::size_t i = 0; i < lab.experiments.size(); ++i) lab.experiments[i].group = i % 2 == 0 ? "day-1" : "day-2";
+  SuiteModel model = suite_model(lab);
+  model.effects.push_back({"scale_error", {1.002}});
+  model.effects.push_back({kGroupVariation, {0.002}, "scale_error.Es"});
+  return {std::move(lab), std::move(model)};
 }
 
 TEST(Folds, KindsThenGroupsThenExperiments) {
@@ -122,11 +134,7 @@ TEST(CrossValidation, HeldOutPartsSumToTheHeldOutLikelihoodWithinGroups) {
   // With a spread between groups the held-out runs are not independent of the training runs of
   // their group: each part is a run's density given the runs before it (the chain rule), and the
   // parts of every fold sum to log L(all) - log L(training), for both parts of the likelihood.
-  Suite lab = test::synth_suite(load_world(kStandard), "cv_parts");
-  for (std::size_t i = 0; i < lab.experiments.size(); ++i) lab.experiments[i].group = i % 2 == 0 ? "day-1" : "day-2";
-  SuiteModel model = suite_model(lab);
-  model.effects.push_back({"scale_error", {1.002}});
-  model.effects.push_back({kGroupVariation, {0.002}, "scale_error.Es"});
+  const auto [lab, model] = two_day_scale_lab("cv_parts");
   const std::vector<std::vector<RunResidual>> all = residuals(lab, model);
   const Folds folds = make_folds(lab);
   ASSERT_GE(folds.size(), 2u);
@@ -151,11 +159,7 @@ TEST(CrossValidation, AViewAndTheWholeSuiteShareOnePropagation) {
   // held-out score then asks for the whole suite at the fitted point. The store propagates
   // only what is missing each time, and every experiment's residuals are residuals()'s, bit for
   // bit, with the group indices of the whole suite.
-  Suite lab = test::synth_suite(load_world(kStandard), "cv_partial");
-  for (std::size_t i = 0; i < lab.experiments.size(); ++i) lab.experiments[i].group = i % 2 == 0 ? "day-1" : "day-2";
-  SuiteModel model = suite_model(lab);
-  model.effects.push_back({"scale_error", {1.002}});
-  model.effects.push_back({kGroupVariation, {0.002}, "scale_error.Es"});
+  const auto [lab, model] = two_day_scale_lab("cv_partial");
   const std::vector<std::vector<RunResidual>> direct = residuals(lab, model);
   const Folds folds = make_folds(lab);
   ASSERT_GE(folds.size(), 2u);

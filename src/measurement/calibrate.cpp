@@ -121,25 +121,12 @@ std::vector<std::size_t> specs_of_entry(const SuiteModel& model, const SuiteMode
   return {*i};
 }
 
-/// The catalogue's (or a custom effect's) description of the fit name "<effect>.<parameter>" of
-/// one of `model`'s effects; nullptr for a robot parameter.
-const EffectParameterInfo* parameter_info(const SuiteModel& model, const std::string& name) {
-  const std::size_t dot = name.find('.');
-  const EffectSpec* spec = dot == std::string::npos ? nullptr : find_spec(model.effects, name.substr(0, dot));
-  const EffectInfo* info = spec ? info_of(*spec) : nullptr;
-  if (!info) return nullptr;
-  for (const EffectParameterInfo& p : info->parameters) {
-    if (p.name == name.substr(dot + 1)) return &p;
-  }
-  return nullptr;
-}
-
 /// True when every one of `names` does nothing at the closed lower edge of its range: the
 /// likelihood ratio for taking them out is then a 50:50 chi^2 mixture [Self87].
 bool removal_on_boundary(const SuiteModel& model, const std::vector<std::string>& names) {
   return std::all_of(names.begin(), names.end(), [&](const std::string& n) {
-    const EffectParameterInfo* p = parameter_info(model, n);
-    return p && p->neutral == p->lower && !p->open_lower;
+    const EffectParameterInfo* p = effect_parameter_info(model, n);
+    return p && p->neutral_at_edge();
   });
 }
 
@@ -153,7 +140,7 @@ double wald_statistic(const FitResult& fit, const std::vector<std::string>& name
   std::vector<Eigen::Index> at;
   for (const std::string& name : names) {
     const auto it = std::find(fit.names.begin(), fit.names.end(), name);
-    const EffectParameterInfo* p = parameter_info(fit.model, name);
+    const EffectParameterInfo* p = effect_parameter_info(fit.model, name);
     if (it == fit.names.end() || !p) return kNone;
     at.push_back(static_cast<Eigen::Index>(it - fit.names.begin()));
     delta(static_cast<Eigen::Index>(at.size() - 1)) = fit.values(at.back()) - p->neutral;

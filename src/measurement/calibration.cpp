@@ -8,6 +8,7 @@
 #include <functional>
 #include <limits>
 #include <nlopt.hpp>
+#include <utility>
 
 #include "odomcov/base/error.hpp"
 #include "odomcov/base/format.hpp"
@@ -757,15 +758,33 @@ std::vector<std::vector<RunResidual>> select_experiments(
   return out;
 }
 
-double& fitted_parameter(SuiteModel& model, const std::string& name) {
-  if (const RobotParameter* p = find_robot_parameter(name)) return p->ref(model.robot);
+namespace {
+
+/// The spec of `effects` that the fit name "<effect>.<parameter>" names, and the parameter's
+/// index in it; spec nullptr when there is none.
+template <class List>  // EffectList, or const EffectList
+auto locate_parameter(List& effects, const std::string& name) -> std::pair<decltype(find_spec(effects, name)), std::size_t> {
   const std::size_t dot = name.find('.');
-  EffectSpec* spec = dot == std::string::npos ? nullptr : find_spec(model.effects, name.substr(0, dot));
+  auto* spec = dot == std::string::npos ? nullptr : find_spec(effects, name.substr(0, dot));
   const EffectInfo* info = spec ? info_of(*spec) : nullptr;
   for (std::size_t i = 0; info && i < info->parameters.size() && i < spec->values.size(); ++i) {
-    if (info->parameters[i].name == name.substr(dot + 1)) return spec->values[i];
+    if (info->parameters[i].name == name.substr(dot + 1)) return {spec, i};
   }
-  throw std::invalid_argument("fitted_parameter: the model has no " + name);
+  return {nullptr, 0};
+}
+
+}  // namespace
+
+double& fitted_parameter(SuiteModel& model, const std::string& name) {
+  if (const RobotParameter* p = find_robot_parameter(name)) return p->ref(model.robot);
+  const auto [spec, i] = locate_parameter(model.effects, name);
+  if (!spec) throw std::invalid_argument("fitted_parameter: the model has no " + name);
+  return spec->values[i];
+}
+
+const EffectParameterInfo* effect_parameter_info(const SuiteModel& model, const std::string& name) {
+  const auto [spec, i] = locate_parameter(model.effects, name);
+  return spec ? &info_of(*spec)->parameters[i] : nullptr;
 }
 
 std::string check_fit_parameter(const std::string& name, const EffectList& context) {

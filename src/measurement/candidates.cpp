@@ -27,7 +27,7 @@ CandidateType effect_candidate(const EffectInfo& info) {
                             info.diagnose_fitted.end();
     if (!fitted) continue;
     c.fitted.push_back(info.name + "." + p.name);
-    c.on_boundary = c.on_boundary && p.neutral == p.lower && !p.open_lower;
+    c.on_boundary = c.on_boundary && p.neutral_at_edge();
   }
   return c;
 }

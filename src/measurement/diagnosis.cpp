@@ -146,8 +146,6 @@ void describe_fit(const Suite& suite, const CandidateType& type, Eigen::Index of
   c.stderrs = stderrs;
 }
 
-/// True when a parameter's "no effect" value is the closed lower edge of its range.
-bool neutral_at_edge(const EffectParameterInfo& p) { return p.neutral == p.lower && !p.open_lower; }
 
 /// The group_variation candidate varying `target` ("wheelbase_error.Eb"): it fits the varied
 /// parameter too when its effect is not in the model yet (joining at its neutral value), and
@@ -171,7 +169,7 @@ CandidateType group_candidate(const std::string& target, const EffectList& model
     EffectSpec spec{effect, {}};
     for (const EffectParameterInfo& p : varied.parameters) {
       spec.values.push_back(p.neutral);
-      if (effect + "." + p.name == target) c.on_boundary = neutral_at_edge(p);
+      if (effect + "." + p.name == target) c.on_boundary = p.neutral_at_edge();
     }
     c.start.push_back(spec);
     c.fitted.push_back(target);
@@ -179,7 +177,7 @@ CandidateType group_candidate(const std::string& target, const EffectList& model
   c.start.push_back({kGroupVariation,
                      {neutral_start ? group.parameters[0].neutral : group.parameters[0].typical}, target});
   c.fitted.push_back(std::string(kGroupVariation) + "." + group.parameters[0].name);
-  c.on_boundary = c.on_boundary && neutral_at_edge(group.parameters[0]);
+  c.on_boundary = c.on_boundary && group.parameters[0].neutral_at_edge();
   return c;
 }
 

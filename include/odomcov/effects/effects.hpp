@@ -52,6 +52,10 @@ struct EffectParameterInfo {
   /// True for the std-dev of a parameter a custom effect draws per run (`random: {p: sd}`, the
   /// fit parameter <name>.sd_p): a spread, fitted on the scatter and never varied by groups.
   bool random_sd = false;
+
+  /// True when "no effect" is the closed lower edge of the range (a rate, a spread at 0): a
+  /// likelihood ratio for the parameter is then a 50:50 chi^2 mixture [Self87].
+  bool neutral_at_edge() const { return neutral == lower && !open_lower; }
 };
 
 /// How a fit moves one parameter: the coordinate u its optimiser sees (v = f(u)), the box and

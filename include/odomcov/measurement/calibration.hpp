@@ -112,6 +112,10 @@ std::vector<std::vector<RunResidual>> select_experiments(
 /// or an effect's ("wheelbase_error.Eb"). Throws std::invalid_argument when the model lacks it.
 double& fitted_parameter(SuiteModel& model, const std::string& name);
 
+/// The description (range, neutral value) of an effect's fitted parameter in a model, by its
+/// fit name ("wheelbase_error.Eb"); nullptr for a robot parameter or one the model lacks.
+const EffectParameterInfo* effect_parameter_info(const SuiteModel& model, const std::string& name);
+
 struct FitResult {
   std::vector<std::string> names;
   Eigen::VectorXd values;
