@@ -75,6 +75,37 @@ TEST(FastPath, FitMatchesExactOnOptiOdomSquares) {
                   Likelihood::full);
 }
 
+TEST(FastPath, AWallBesideAnAnchorIsSteppedAround) {
+  // A custom noise factor that is the parameter itself, started just above 0: the fast path's
+  // first difference point (start - h) gives a negative factor, which a custom expression may
+  // not. The path takes it as a wall and differences on the other side (h, 2h), as beside a
+  // bound; until 2026-12 the error ended the fit, and calibrate with it (exit 2 on the OptiOdom
+  // runs with a custom noise "1 + c*abs(a)", whose fit walked up to the wall at the largest
+  // deceleration). The optimum, a factor near 1 (the world's own noise), is the exact path's.
+  const Suite lab = synth_suite(load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml"), "wall");
+  CustomEffect def;
+  def.name = "noise_factor";
+  def.parameters = {"c"};
+  def.noise.text = "c";
+  SuiteModel start = suite_model(lab);
+  start.effects = {define_custom_effect(def, {1e-4})};
+  const EffectParameterInfo* c = effect_parameter_info(start, "noise_factor.c");
+  ASSERT_NE(c, nullptr);
+  const FitCoordinate f = fit_coordinate(*c);
+  ASSERT_LT(1e-4 - std::max(f.fd_abs, f.fd_rel * std::abs(1e-4 - f.fd_origin)), 0.0)
+      << "the first difference point must lie beyond the wall";
+  expect_same_fit(lab, start, {"noise_factor.c"}, Likelihood::scatter);
+
+  // Walls on both sides of the start, closer than a difference step (5e-4 here): no surrogate
+  // can be built; the fit takes the exact path, which cannot leave the start either.
+  CustomEffect pinned = def;
+  pinned.noise.text = "1 - 1e8 * (c - 0.5)^2";
+  start.effects = {define_custom_effect(pinned, {0.5})};
+  const FitResult walled = fit(lab, start, {"noise_factor.c"}, Likelihood::scatter, nullptr, FitPath::fast);
+  EXPECT_NEAR(walled.values(0), 0.5, 1e-4);
+  EXPECT_NEAR(walled.log_likelihood_after, walled.log_likelihood_before, kLogLikelihoodTolerance);
+}
+
 /// Every candidate: same significance and the same best, gains within the tolerance, and where
 /// a parameter has a standard error, the same value within 0.1 of it. `fast_out` receives the
 /// fast diagnosis.

@@ -8,6 +8,7 @@
 #include <functional>
 #include <limits>
 #include <nlopt.hpp>
+#include <optional>
 #include <utility>
 
 #include "odomcov/base/error.hpp"
@@ -467,15 +468,28 @@ class Surrogate {
   mutable Residuals buffer_;
 };
 
-/// The two offsets of parameter k's difference points from v: +-h when both are inside its
-/// range, else h and 2h (or -h and -2h) away from the bound.
-std::pair<double, double> axis_offsets(const Handle& h, double v) {
+/// The residuals of `model`, or nullptr where a custom expression is not finite (or leaves its
+/// range) there: a wall, as for the optimiser.
+const Residuals* residuals_or_wall(ResidualCache& cache, const SuiteModel& model, std::atomic<std::int64_t>* counter) {
+  try {
+    return &cache.at(model, counter);
+  } catch (const InputError&) {
+    return nullptr;
+  }
+}
+
+/// The pairs of offsets of parameter k's difference points from v, preferred first: +-h when
+/// both are inside its range, then h and 2h, then -h and -2h (away from a bound, or from a wall
+/// a custom expression meets on one side).
+std::vector<std::pair<double, double>> axis_offsets(const Handle& h, double v) {
   const double step = h.fd_step(v);
   const double lo = h.from_u(h.lower_u), hi = h.from_u(h.upper_u);
   auto inside = [&](double x) { return x >= lo && x <= hi; };
-  if (inside(v - step) && inside(v + step)) return {-step, step};
-  if (inside(v + 2 * step)) return {step, 2 * step};
-  return {-step, -2 * step};
+  std::vector<std::pair<double, double>> out;
+  if (inside(v - step) && inside(v + step)) out.emplace_back(-step, step);
+  if (inside(v + 2 * step)) out.emplace_back(step, 2 * step);
+  if (inside(v - 2 * step) || out.empty()) out.emplace_back(-step, -2 * step);
+  return out;
 }
 
 /// A re-anchor takes the previous anchor's curvatures only when that anchor's surrogate foretold
@@ -484,37 +498,66 @@ std::pair<double, double> axis_offsets(const Handle& h, double v) {
 /// afresh.
 constexpr double kCurvatureTrust = 1.0;
 
-/// The surrogate at the values v (model holds them): the anchor, two points per parameter and
-/// one per pair, all from the cache.
-Surrogate anchor_at(const SuiteModel& model, const std::vector<Handle>& handles,
-                    const std::vector<double>& v, ResidualCache& cache,
-                    std::atomic<std::int64_t>* counter, const Surrogate* near = nullptr) {
-  Surrogate s(cache.at(model, counter), v);
-  if (near) {  // a re-anchor: one point per parameter, curvatures from the previous anchor
-    for (std::size_t k = 0; k < handles.size(); ++k) {
-      const double o = axis_offsets(handles[k], v[k]).second > 0 ? handles[k].fd_step(v[k]) : -handles[k].fd_step(v[k]);
-      SuiteModel m = model;
-      handles[k].ref(m) = v[k] + o;
-      s.set_axis_from(k, o, cache.at(m, counter), *near);
+/// The residuals of `model` with parameters `offsets` (index, offset from v) moved, or nullptr
+/// at a wall.
+const Residuals* residuals_moved(const SuiteModel& model, const std::vector<Handle>& handles,
+                                 const std::vector<double>& v,
+                                 std::initializer_list<std::pair<std::size_t, double>> offsets,
+                                 ResidualCache& cache, std::atomic<std::int64_t>* counter) {
+  SuiteModel m = model;
+  for (const auto& [k, o] : offsets) handles[k].ref(m) = v[k] + o;
+  return residuals_or_wall(cache, m, counter);
+}
+
+/// Parameter k's axis of the surrogate s at v from the first pair of difference points that no
+/// wall blocks (on a re-anchor one point, curvatures from `near`); its first point's offset, or
+/// NaN when walls block every pair.
+double set_axis_clear_of_walls(Surrogate& s, const SuiteModel& model, const std::vector<Handle>& handles,
+                               const std::vector<double>& v, std::size_t k, ResidualCache& cache,
+                               std::atomic<std::int64_t>* counter, const Surrogate* near) {
+  double tried = 0.0;
+  for (const auto& [o1, o2] : axis_offsets(handles[k], v[k])) {
+    if (near) {
+      const double o = o2 > 0 ? handles[k].fd_step(v[k]) : -handles[k].fd_step(v[k]);
+      if (o == tried) continue;  // the pairs h, 2h and -h, h share the point h
+      tried = o;
+      if (const Residuals* f = residuals_moved(model, handles, v, {{k, o}}, cache, counter)) {
+        s.set_axis_from(k, o, *f, *near);
+        return o;
+      }
+      continue;
     }
-    return s;
+    // The cache's entries stay where they are: f1 outlives the next evaluation.
+    const Residuals* f1 = residuals_moved(model, handles, v, {{k, o1}}, cache, counter);
+    const Residuals* f2 = f1 ? residuals_moved(model, handles, v, {{k, o2}}, cache, counter) : nullptr;
+    if (f2) {
+      s.set_axis(k, o1, *f1, o2, *f2);
+      return o1;
+    }
   }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+/// The surrogate at the values v (model holds them): the anchor, two points per parameter and
+/// one per pair, all from the cache (a re-anchor: one point per parameter, curvatures from the
+/// previous anchor `near`). Empty when walls of custom expressions block every side of a
+/// parameter there.
+std::optional<Surrogate> anchor_at(const SuiteModel& model, const std::vector<Handle>& handles,
+                                   const std::vector<double>& v, ResidualCache& cache,
+                                   std::atomic<std::int64_t>* counter, const Surrogate* near = nullptr) {
+  const Residuals* anchor = residuals_or_wall(cache, model, counter);
+  if (!anchor) return std::nullopt;
+  Surrogate s(*anchor, v);
   std::vector<double> first(handles.size());
   for (std::size_t k = 0; k < handles.size(); ++k) {
-    const auto [o1, o2] = axis_offsets(handles[k], v[k]);
-    SuiteModel m = model;
-    handles[k].ref(m) = v[k] + o1;
-    const Residuals& f1 = cache.at(m, counter);
-    handles[k].ref(m) = v[k] + o2;
-    s.set_axis(k, o1, f1, o2, cache.at(m, counter));
-    first[k] = o1;
+    first[k] = set_axis_clear_of_walls(s, model, handles, v, k, cache, counter, near);
+    if (std::isnan(first[k])) return std::nullopt;
   }
-  for (std::size_t k = 0; k < handles.size(); ++k) {
+  for (std::size_t k = 0; !near && k < handles.size(); ++k) {
     for (std::size_t l = k + 1; l < handles.size(); ++l) {
-      SuiteModel m = model;
-      handles[k].ref(m) = v[k] + first[k];
-      handles[l].ref(m) = v[l] + first[l];
-      s.set_pair(k, l, cache.at(m, counter));
+      const Residuals* f = residuals_moved(model, handles, v, {{k, first[k]}, {l, first[l]}}, cache, counter);
+      if (!f) return std::nullopt;
+      s.set_pair(k, l, *f);
     }
   }
   return s;
@@ -544,7 +587,15 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
   };
   double ll = exact(u);
   apply(model, handles, u.data());
-  Surrogate s = anchor_at(model, handles, values(u), cache, counter);
+  std::optional<Surrogate> start = anchor_at(model, handles, values(u), cache, counter);
+  if (!start) {  // walled off at the start: the exact path, whose optimiser takes walls
+    FitResult exact_fit = fit_exact([&](const SuiteModel& m) { return cache.evaluate(m); }, model, handles,
+                                    kind, counter, std::move(out));
+    exact_fit.evaluations = static_cast<int>(cache.computed() - computed_before);
+    exact_fit.verified = true;
+    return exact_fit;
+  }
+  Surrogate s = std::move(*start);
   Terms surrogate = [&](const std::vector<double>& x) { return s.terms(values(x), kind); };
   out.verified = false;
   for (out.anchors = 1; out.anchors <= kMaxAnchors; ++out.anchors) {
@@ -571,7 +622,9 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
     if (gain < kFitTolerance || matched) break;
     apply(model, handles, u.data());
     const bool trusted = std::abs(ll_p - predicted) < kCurvatureTrust;
-    s = anchor_at(model, handles, values(u), cache, counter, trusted ? &s : nullptr);
+    std::optional<Surrogate> next = anchor_at(model, handles, values(u), cache, counter, trusted ? &s : nullptr);
+    if (!next) break;  // a wall beside the new point: it stands, unverified (refit_exactly takes walls)
+    s = std::move(*next);
   }
   out.anchors = std::min(out.anchors, kMaxAnchors);
   out.log_likelihood_after = ll;
