@@ -326,6 +326,30 @@ TEST(Diagnose, AMimicIsNamedAndNotAdopted) {
   EXPECT_NE(tdw.decision.find("predicts the held-out folds better"), std::string::npos) << tdw.decision;
 }
 
+TEST(Diagnose, ACandidateThatCannotPredictAFoldsRunsIsContradictedByIt) {
+  // A custom noise factor 1 + c*v where the model overstates the wheel noise twice on runs at
+  // 0.2 and 1 m/s: fitted without the fast runs it wants c = -3.75, a negative factor on them.
+  // That fold contradicts it, in words, and the candidate is a mimic; until 2026-12 the error of
+  // the expression ended diagnose (exit 2).
+  const Suite lab = test::synth_suite(load_world(ODOMCOV_SOURCE_DIR "/tests/data/worlds/noise_overstated_two_speeds.yaml"),
+                                      "wall_fold");
+  CustomEffect def;
+  def.name = "vnoise";
+  def.parameters = {"c"};
+  def.noise.text = "1 + c * v";
+  const Diagnosis d = diagnose(lab, suite_model(lab), kDiagnoseAlpha, {"backlash"}, nullptr, {define_custom_effect(def, {0.0})});
+  const Candidate& c = candidate(d, "vnoise");
+  ASSERT_TRUE(c.significant);
+  const auto fast = std::find_if(c.held_out_by_fold.begin(), c.held_out_by_fold.end(),
+                                 [](const Candidate::FoldGain& g) { return g.fold.rfind("fastline", 0) == 0; });
+  ASSERT_NE(fast, c.held_out_by_fold.end());
+  EXPECT_NE(fast->wall.find("must be >= 0"), std::string::npos) << fast->wall;
+  EXPECT_TRUE(fast->contradicts);
+  EXPECT_FALSE(fast->counted);
+  EXPECT_EQ(c.verdict, "mimic");
+  EXPECT_NE(c.decision.find("cannot predict these runs at all"), std::string::npos) << c.decision;
+}
+
 TEST(Diagnose, AFoldThatLeavesTheModelUndeterminedTestsNothing) {
   // The model's turn-dependent wheelbase is right, and the wheel diameters differ (Ed = 0.998).
   // Only the arcs turn along arcs, so with the arcs held out the model's arc wheelbase is not

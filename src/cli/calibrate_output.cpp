@@ -41,10 +41,10 @@ json parameters_json(const CorrectedParameters& p) {
 json decision_json(const Candidate& c) {
   json folds = json::array();
   for (const Candidate::FoldGain& g : c.held_out_by_fold) {
-    folds.push_back({{"fold", g.fold}, {"gain", g.gain}, {"stderr_ratio", finite_or_null(g.stderr_ratio)},
+    folds.push_back({{"fold", g.fold}, {"gain", finite_or_null(g.gain)}, {"stderr_ratio", finite_or_null(g.stderr_ratio)},
                      {"signal", g.signal}, {"counted", g.counted}, {"contradicts", g.contradicts},
                      {"model_stderr_ratio", finite_or_null(g.model_stderr_ratio)}, {"undetermined", g.undetermined},
-                     {"spread", finite_or_null(g.spread)}});
+                     {"spread", finite_or_null(g.spread)}, {"wall", g.wall}});
   }
   return {{"exact", c.exact},
           {"tails_scale", c.tails_scale},

@@ -13,6 +13,7 @@
 #include <numeric>
 #include <utility>
 
+#include "odomcov/base/error.hpp"
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/design.hpp"
 #include "odomcov/measurement/residual_features.hpp"
@@ -677,20 +678,33 @@ void cross_validate(const Round& round, FoldSet& set, Trial& t) {
   for (std::size_t f = 0; f < folds.size(); ++f) {
     const std::vector<bool> training = folds.training(f);
     const auto& b = round.cache.full(base.models[f], round.counter());
-    const auto& c = round.cache.full(mine.models[f], round.counter());
     const StderrRatio own = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, first_own, t.fitted.size(), false);
     const StderrRatio model = stderr_ratio(mine.stderrs[f], t.fit.stderrs, t.fitted, 0, first_own, true);
     Candidate::FoldGain g;
     g.fold = folds.names[f];
-    std::vector<double> parts = held_out_parts(judged(c, b, on_mean), training, t.kind);
+    g.stderr_ratio = own.ratio;
+    g.signal = signal[f];
+    g.model_stderr_ratio = model.ratio;
+    const std::vector<std::vector<RunResidual>>* c = nullptr;
+    try {
+      c = &round.cache.full(mine.models[f], round.counter());
+    } catch (const InputError& e) {
+      // Fitted without the fold, a custom expression leaves its range on the fold's runs (a
+      // noise factor fitted below 1 at the training runs' speeds, negative at the fold's): it
+      // cannot predict them at all.
+      g.wall = e.what();
+      g.gain = kNaN;
+      g.counted = false;
+      g.contradicts = true;
+      t.c.held_out_by_fold.push_back(g);
+      continue;
+    }
+    std::vector<double> parts = held_out_parts(judged(*c, b, on_mean), training, t.kind);
     const std::vector<double> base_parts = held_out_parts(b, training, t.kind);
     for (std::size_t i = 0; i < parts.size(); ++i) parts[i] -= base_parts[i];
     g.gain = std::accumulate(parts.begin(), parts.end(), 0.0);
     g.spread = spread_of_sum(parts);
     g.parts = parts.size();
-    g.stderr_ratio = own.ratio;
-    g.signal = signal[f];
-    g.model_stderr_ratio = model.ratio;
     if (model.ratio > kMaxFoldStderrRatio) g.undetermined = model.name;
     // A fold whose training runs leave a parameter of the model itself undetermined tests
     // nothing: the candidate's fit and the base's both extrapolate it there, and their
@@ -725,6 +739,7 @@ std::string worst_folds(std::vector<Candidate::FoldGain> gains, std::size_t most
 
 /// Why a fold could not test the candidate, in words.
 std::string why_uncounted(const Candidate& c, const Candidate::FoldGain& g) {
+  if (!g.wall.empty()) return "fitted without it, " + c.effect + " cannot predict these runs at all: " + g.wall;
   if (g.contradicts) {
     return "fitted without it, " + c.effect + " is not determined (" + format_number(g.stderr_ratio, "%.2g") +
            " times the standard error), and it loses " + format_number(-g.gain, "%.3g") +
@@ -760,8 +775,10 @@ std::string mimic_text(const Trial& t, const Folds& folds) {
   if (!c.evidence.empty()) text += ", most in " + c.evidence[0].first;
   text += ", but fitted without each " + std::string(folds.by == "kind" ? "kind of path" : folds.by == "group" ? "group" : "fold") +
           " in turn it predicts " + (c.delta_held_out <= 0 ? "the held-out runs" : "some of them") +
-          " worse than the model without it (in all " + format_number(c.delta_held_out, "%+.4g") + "; worst: " +
-          worst_folds(c.held_out_by_fold, 2) +
+          " worse than the model without it (" +
+          (std::isfinite(c.delta_held_out)
+               ? "in all " + format_number(c.delta_held_out, "%+.4g") + "; worst: " + worst_folds(c.held_out_by_fold, 2)
+               : std::string("no fold's gain counted")) +
           uncounted_folds(c) + "). It imitates part of the misfit (" + c.signature +
           ") in the runs it is fitted on, but it is not what predicts the others: something else is missing.";
   return text;

@@ -186,6 +186,10 @@ struct Candidate {
     /// runs leave the model itself undetermined cannot test the candidate either.
     double model_stderr_ratio = 1.0;
     std::string undetermined;
+    /// Where the candidate fitted without the fold cannot predict the fold's runs at all (a
+    /// custom expression leaves its range on them), why ("" else): the fold then contradicts
+    /// it, with no gain.
+    std::string wall;
   };
   std::vector<FoldGain> held_out_by_fold;
   /// "adopted"; "mimic" (significant in-sample, predicts the held-out folds worse in all, one of
