@@ -5,7 +5,9 @@ the final model's sizes ± standard errors, the NEES and log-likelihood on the t
 (and their NEES per kind of path), the NEES on the held-out runs (pooled, per kind of path,
 the model's effects refitted on them, the marginal NEES of the model, of the training
 posterior of what it sized and of everything, experiments consistent, experiments outside the training
-domain), the candidates the cross-validation stopped, and the verdict. Every figure is
+domain; and per group of held-out experiments, the kind of path with the last word of the name,
+OptiOdom's direction cw, ccw or straight), the candidates the cross-validation stopped, and the
+verdict. Every figure is
 calibrate's; this script only lays them side by side.
 
 Usage: loop_summary.py NAME=CALIBRATE_DIR_OR_JSON [NAME=... ...] > summary.md
@@ -55,6 +57,19 @@ def held_out_cells(held, kinds):
                       f"{held['consistent_experiments']} of {held['experiments']}", str(outside)]
 
 
+def held_out_groups(held):
+    """The held-out NEES per run by experiment group: the kind (the name's first part) with the
+    name's last part when that is a word (OptiOdom's cw, ccw, straight; not a session's
+    number), weighted by runs: {group: (NEES mean, runs)}."""
+    sums = {}
+    for e in held["compare"]["experiments"]:
+        parts = e["name"].split("-")
+        group = parts[0] + (" " + parts[-1] if len(parts) > 1 and parts[-1].isalpha() else "")
+        total, runs = sums.get(group, (0.0, 0))
+        sums[group] = (total + e["nees_mean"] * e["n"], runs + e["n"])
+    return {g: (total / runs, runs) for g, (total, runs) in sums.items()}
+
+
 def stopped(report):
     """Significant candidates the guards stopped, with the rule (mimics first)."""
     out = []
@@ -95,6 +110,15 @@ def main():
         cells = [name, f"{after['nees_mean']:.2f}", after["verdict"], f"{after['log_likelihood']:.1f}"]
         cells += held_out_cells(r.get("holdout"), kinds) if held else []
         print("| " + " | ".join(cells) + " |")
+    groups = {name: held_out_groups(r["holdout"]) for name, r in runs if r.get("holdout")}
+    columns = sorted({g for by_group in groups.values() for g in by_group})
+    if columns:
+        print("\n## Held-out NEES per run by experiment group (kind of path and the name's last word; runs)\n")
+        print("| split | " + " | ".join(columns) + " |")
+        print("|---|" + "---|" * len(columns))
+        for name, by_group in groups.items():
+            print(f"| {name} | " + " | ".join(f"{by_group[g][0]:.2f} ({by_group[g][1]})" if g in by_group else ""
+                                              for g in columns) + " |")
     trained = sorted({k for _, r in runs for k in r["after"].get("by_kind", {})})
     if trained:
         print("\n## NEES per run on the training runs, by kind of path (in-sample)\n")

@@ -113,13 +113,14 @@ if want optiodom; then
     "jun_to_dec --train ^[a-z]+-(2306|2506) --test ^[a-z]+-2312"
   )
   # calib NAME SUITE_DIR [calibrate options]: the report calibrate_NAME.txt; for the study's own
-  # splits (not the _custom and _day variants, whose figures custom.md and group.md tabulate)
+  # splits (not the _custom, _spins and _day variants, whose figures custom.md, spins.md and
+  # group.md tabulate)
   # also calibrate_NAME.json and the plot calibrate_NAME.png.
   calib() {
     local name=$1 from=$2 dir="$suite-calibrate-$1"
     shift 2
     save "$out/calibrate_$name.txt" "$odomcov" calibrate "$from/suite.yaml" --out "$dir" "$@"
-    [[ $name == *_custom || $name == *_day ]] && return
+    [[ $name == *_custom || $name == *_spins || $name == *_day ]] && return
     cp "$dir/calibrate.json" "$out/calibrate_$name.json"
     "$python" scripts/plot_loop.py "$dir" --out "$out/calibrate_$name.png"
   }
@@ -143,6 +144,14 @@ if want optiodom; then
     read -r -a args <<<"$split"
     calib "${args[0]}_custom" "$suite" "${args[@]:1}" --candidates "$out/candidates.yaml"
   done
+  # Physics for the Ivanjko turns on the spot (candidates_spins.yaml: noise growing with the
+  # acceleration, the spin fraction or the turn rate; a wheelbase growing with the turn rate), on
+  # all the runs and on the two splits that miss the floor.
+  for split in "${splits[@]}"; do
+    read -r -a args <<<"$split"
+    [[ ${args[0]} == all || ${args[0]} == hold_ivanjko || ${args[0]} == jun_to_dec ]] || continue
+    calib "${args[0]}_spins" "$suite" "${args[@]:1}" --candidates "$out/candidates_spins.yaml"
+  done
   # Groups by recording day (import --group day, above) instead of by session, on all the runs.
   calib all_day "$suite-day"
   set +f
@@ -156,6 +165,11 @@ if want optiodom; then
   done
   save "$out/summary.md" "$python" scripts/loop_summary.py "${names[@]}"
   save "$out/custom.md" "$python" scripts/loop_summary.py "${custom[@]}"
+  spins=()
+  for n in all hold_ivanjko jun_to_dec; do
+    spins+=("$n=$out/calibrate_$n.json" "${n}_spins=$suite-calibrate-${n}_spins")
+  done
+  save "$out/spins.md" "$python" scripts/loop_summary.py "${spins[@]}"
   save "$out/group.md" "$python" scripts/loop_summary.py "all (session groups)=$out/calibrate_all.json" \
     "all (day groups)=$suite-calibrate-all_day"
   # In-sample reach: how near 3 the model family gets on the runs a hold-out judges (the Ivanjko
