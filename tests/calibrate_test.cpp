@@ -350,6 +350,42 @@ TEST(Diagnose, ACandidateThatCannotPredictAFoldsRunsIsContradictedByIt) {
   EXPECT_NE(c.decision.find("cannot predict these runs at all"), std::string::npos) << c.decision;
 }
 
+TEST(Calibrate, AModelThatCannotPredictTheHeldOutRunsIsStillWritten) {
+  // Calibrated on the slow runs, the adopted noise factor 1 + c*v (c near -2.5) is negative at
+  // the held-out runs' 0.6 m/s. The hold-out says so, with the experiments outside the training
+  // domain, and the menu of next experiments leaves out those at 0.6 m/s; until 2026-12 the
+  // expression's error ended calibrate (exit 2) and nothing was written.
+  const Suite lab = test::synth_suite(load_world(ODOMCOV_SOURCE_DIR "/tests/data/worlds/noise_below_one_when_slow.yaml"),
+                                      "wall_holdout");
+  Suite train = lab, fast = lab;
+  train.experiments.clear();
+  fast.experiments.clear();
+  for (const SuiteExperiment& ex : lab.experiments) (ex.kind == "fast" ? fast : train).experiments.push_back(ex);
+  CustomEffect def;
+  def.name = "vnoise";
+  def.parameters = {"c"};
+  def.noise.text = "1 + c * v";
+  CalibrateOptions options;
+  options.diagnose.candidates = {define_custom_effect(def, {0.0})};
+  const CalibrateResult c = calibrate(train, suite_model(train), options, &fast);
+  ASSERT_NE(std::find(c.named.begin(), c.named.end(), "vnoise"), c.named.end());
+  SuiteModel model = c.model;
+  const double slope = fitted_parameter(model, "vnoise.c");
+  ASSERT_LT(1 + slope * 0.6, 0.0);
+  ASSERT_TRUE(c.holdout);
+  EXPECT_NE(c.holdout->cannot_predict.find("must be >= 0"), std::string::npos) << c.holdout->cannot_predict;
+  EXPECT_EQ(c.holdout->summary.verdict, "inconsistent");
+  EXPECT_EQ(c.holdout->experiments, 1u);
+  EXPECT_FALSE(c.holdout->extrapolation.empty());  // 0.6 m/s above the training runs' speeds
+  ASSERT_FALSE(c.next_experiments.empty());
+  for (const NextExperiment& n : c.next_experiments) {
+    EXPECT_EQ(n.experiment.path_yaml.find("speed: 0.6,"), std::string::npos) << n.experiment.name;
+  }
+  bool menu_has_fast = false;
+  for (const MenuExperiment& m : experiment_menu(train)) menu_has_fast = menu_has_fast || m.path_yaml.find("speed: 0.6,") != std::string::npos;
+  EXPECT_TRUE(menu_has_fast);  // the filter was needed
+}
+
 TEST(Diagnose, AFoldThatLeavesTheModelUndeterminedTestsNothing) {
   // The model's turn-dependent wheelbase is right, and the wheel diameters differ (Ed = 0.998).
   // Only the arcs turn along arcs, so with the arcs held out the model's arc wheelbase is not

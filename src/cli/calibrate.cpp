@@ -180,7 +180,8 @@ void write_predictive(std::ostream& out, const HoldoutSummary::Predictive& p) {
   }
 }
 
-void write_holdout(std::ostream& out, const HoldoutSummary& h) {
+/// The model judged on the held-out runs: compare, the NEES, the refit and the predictive check.
+void write_judged_holdout(std::ostream& out, const HoldoutSummary& h) {
   out << "\nHeld-out runs (never seen by the loop): NEES mean " << fixed(h.summary.nees_mean, 3) << ", "
       << h.consistent << " of " << h.experiments << " experiments consistent, " << h.summary.verdict << "\n";
   write_by_kind(out, h.nees_by_kind);
@@ -193,6 +194,17 @@ void write_holdout(std::ostream& out, const HoldoutSummary& h) {
     for (const std::string& p : h.refitted->fit.at_bound) out << "    " << p << " ends at a bound of its range there\n";
   }
   if (h.predictive) write_predictive(out, *h.predictive);
+}
+
+void write_holdout(std::ostream& out, const HoldoutSummary& h) {
+  if (!h.cannot_predict.empty()) {
+    out << "\nHeld-out runs (never seen by the loop): the calibrated model cannot predict them at all, "
+           "inconsistent: "
+        << h.cannot_predict << "\n";
+    out << "  (the model was calibrated and is written; a custom expression of it is out of its range on these runs)\n";
+  } else {
+    write_judged_holdout(out, h);
+  }
   if (h.extrapolation.empty()) {
     out << "  every held-out experiment lies inside the training domain\n";
     return;
@@ -260,7 +272,7 @@ int run_calibrate(const CalibrateCliOptions& opt) {
   }
   bar.finish();
   write_outputs(opt, in.train, *c, calibrate_json(in.train, in.start, *c, opt.alpha,
-                                     c->holdout ? comparison_json(*in.held, c->holdout->comparison) : json(nullptr)));
+                                     c->holdout && c->holdout->cannot_predict.empty() ? comparison_json(*in.held, c->holdout->comparison) : json(nullptr)));
   std::signal(SIGINT, previous);
   std::cout << report(in.train, *c, opt.alpha) << "\nWrote " << opt.out << "/model.yaml, calibrate.json and diff_drive.yaml\n";
   return kExitOk;

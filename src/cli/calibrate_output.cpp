@@ -270,8 +270,9 @@ json holdout_json(const HoldoutSummary& h) {
                   {"nees_mean", p.nees_mean}, {"by_kind", by_kind_json(p.nees_by_kind)},
                   {"parameters", parameters}};
   }
-  return {{"nees_mean", h.summary.nees_mean}, {"verdict", h.summary.verdict},
-          {"log_likelihood", h.summary.log_likelihood}, {"experiments", h.experiments},
+  return {{"nees_mean", finite_or_null(h.summary.nees_mean)}, {"verdict", h.summary.verdict},
+          {"cannot_predict", h.cannot_predict},
+          {"log_likelihood", finite_or_null(h.summary.log_likelihood)}, {"experiments", h.experiments},
           {"consistent_experiments", h.consistent}, {"by_kind", by_kind_json(h.nees_by_kind)},
           {"extrapolation", h.extrapolation}, {"refitted", refitted}, {"predictive", predictive}};
 }

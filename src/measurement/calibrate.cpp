@@ -9,6 +9,7 @@
 #include <optional>
 #include <tuple>
 
+#include "odomcov/base/error.hpp"
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/cross_validation.hpp"
 #include "odomcov/measurement/domain.hpp"
@@ -578,6 +579,28 @@ HoldoutSummary::Predictive predict_holdout(const Suite& training, const Suite& h
 
 }  // namespace
 
+namespace {
+
+/// The hold-out of a model that cannot predict the held-out runs, and why (`why`): their
+/// experiments and where they lie outside the training domain, nothing judged.
+HoldoutSummary unpredictable_holdout(const Suite& holdout, const SuiteModel& model, const std::string& why) {
+  HoldoutSummary out;
+  out.cannot_predict = why;
+  out.summary.verdict = "inconsistent";
+  out.summary.nees_mean = std::numeric_limits<double>::quiet_NaN();
+  out.summary.log_likelihood = -std::numeric_limits<double>::infinity();
+  for (const SuiteExperiment& ex : holdout.experiments) {
+    ++out.experiments;
+    if (!model.domain) continue;
+    for (const std::string& x : extrapolation(*model.domain, ex, model.robot.wheelbase_m)) {
+      out.extrapolation.push_back(ex.name + ": " + x);
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 HoldoutSummary judge_holdout(const Suite& holdout, const SuiteModel& model, double alpha,
                              const CalibrationOptions& calibration) {
   HoldoutSummary out;
@@ -610,9 +633,16 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
   if (holdout) {
     SuiteModel judged = out.model;
     judged.measurement_noise = holdout->measurement_noise;
-    out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha, options.diagnose.calibration);
-    out.holdout->refitted = refit_on_holdout(*holdout, judged, named_noise_level(out.named), options, progress);
-    out.holdout->predictive = predict_holdout(suite, *holdout, out.model, named_noise_level(out.named));
+    try {
+      out.holdout = judge_holdout(*holdout, judged, options.diagnose.alpha, options.diagnose.calibration);
+      out.holdout->refitted = refit_on_holdout(*holdout, judged, named_noise_level(out.named), options, progress);
+      out.holdout->predictive = predict_holdout(suite, *holdout, out.model, named_noise_level(out.named));
+    } catch (const InputError& e) {
+      // The held-out runs were read and checked when loaded: what fails now is the model's own
+      // expression on them. The calibration stands and is written; the hold-out says why it
+      // cannot be judged.
+      out.holdout = unpredictable_holdout(*holdout, judged, e.what());
+    }
   }
   // An interrupt during the steps after the rounds: nothing is returned, so nothing is written.
   if (progress && progress->cancel.load()) throw Cancelled();

@@ -8,6 +8,7 @@
 #include <map>
 #include <set>
 
+#include "odomcov/base/error.hpp"
 #include "odomcov/base/format.hpp"
 #include "odomcov/measurement/likelihood.hpp"
 #include "odomcov/measurement/residual_features.hpp"
@@ -507,9 +508,10 @@ PredictiveCheck predictive_check(const Suite& runs, const TrainingUncertainty& u
   return out;
 }
 
-std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit) {
-  const std::vector<MenuExperiment> menu = experiment_menu(suite);
-  // The menu as a suite of one run each (its prediction is all the information needs).
+namespace {
+
+/// Menu items as a suite of one run each (its prediction is all the information needs).
+Suite menu_suite(const Suite& suite, const std::vector<MenuExperiment>& menu) {
   Suite trial = suite;
   trial.experiments.clear();
   for (const MenuExperiment& m : menu) {
@@ -519,6 +521,35 @@ std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult
     ex.runs.push_back({"1", Vector3::Zero(), {}, {}});
     trial.experiments.push_back(std::move(ex));
   }
+  return trial;
+}
+
+/// The menu items the model can predict: a custom expression of it may leave its range on one
+/// (a noise factor fitted below 1 at the suite's speeds, negative at a faster one), at the
+/// fitted values or a difference step from them. Each is tried alone only when the whole menu
+/// fails.
+std::vector<MenuExperiment> predictable(const Suite& suite, std::vector<MenuExperiment> menu, const FitResult& fit) {
+  try {
+    sensitivities(menu_suite(suite, menu), fit.model, fit.names);
+    return menu;
+  } catch (const InputError&) {
+    std::vector<MenuExperiment> out;
+    for (MenuExperiment& m : menu) {
+      try {
+        sensitivities(menu_suite(suite, {m}), fit.model, fit.names);
+        out.push_back(std::move(m));
+      } catch (const InputError&) {
+      }
+    }
+    return out;
+  }
+}
+
+}  // namespace
+
+std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit) {
+  const std::vector<MenuExperiment> menu = predictable(suite, experiment_menu(suite), fit);
+  const Suite trial = menu_suite(suite, menu);
   const Eigen::MatrixXd now = fisher_information(suite, fit.model, fit.names);
   const Sensitivities s = sensitivities(trial, fit.model, fit.names);
   std::vector<Eigen::MatrixXd> adds;
