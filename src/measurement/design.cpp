@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <map>
+#include <optional>
 #include <set>
 
 #include "odomcov/base/error.hpp"
@@ -524,34 +525,33 @@ Suite menu_suite(const Suite& suite, const std::vector<MenuExperiment>& menu) {
   return trial;
 }
 
-/// The menu items the model can predict: a custom expression of it may leave its range on one
-/// (a noise factor fitted below 1 at the suite's speeds, negative at a faster one), at the
-/// fitted values or a difference step from them. Each is tried alone only when the whole menu
-/// fails.
-std::vector<MenuExperiment> predictable(const Suite& suite, std::vector<MenuExperiment> menu, const FitResult& fit) {
+/// The sensitivities of the menu items, or none where the model cannot predict one of them: a
+/// custom expression of it may leave its range there (a noise factor fitted below 1 at the
+/// suite's speeds, negative at a faster one), at the fitted values or a difference step away.
+std::optional<Sensitivities> menu_sensitivities(const Suite& suite, const std::vector<MenuExperiment>& menu,
+                                                const FitResult& fit) {
   try {
-    sensitivities(menu_suite(suite, menu), fit.model, fit.names);
-    return menu;
+    return sensitivities(menu_suite(suite, menu), fit.model, fit.names);
   } catch (const InputError&) {
-    std::vector<MenuExperiment> out;
-    for (MenuExperiment& m : menu) {
-      try {
-        sensitivities(menu_suite(suite, {m}), fit.model, fit.names);
-        out.push_back(std::move(m));
-      } catch (const InputError&) {
-      }
-    }
-    return out;
+    return std::nullopt;
   }
 }
 
 }  // namespace
 
 std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit) {
-  const std::vector<MenuExperiment> menu = predictable(suite, experiment_menu(suite), fit);
-  const Suite trial = menu_suite(suite, menu);
+  std::vector<MenuExperiment> menu = experiment_menu(suite);
+  std::optional<Sensitivities> sens = menu_sensitivities(suite, menu, fit);
+  if (!sens) {  // the items the model cannot predict, each tried alone, leave the menu
+    std::vector<MenuExperiment> predictable;
+    for (MenuExperiment& m : menu) {
+      if (menu_sensitivities(suite, {m}, fit)) predictable.push_back(std::move(m));
+    }
+    menu = std::move(predictable);
+    sens = sensitivities(menu_suite(suite, menu), fit.model, fit.names);
+  }
+  const Sensitivities& s = *sens;
   const Eigen::MatrixXd now = fisher_information(suite, fit.model, fit.names);
-  const Sensitivities s = sensitivities(trial, fit.model, fit.names);
   std::vector<Eigen::MatrixXd> adds;
   Eigen::VectorXd scale = now.diagonal();
   for (std::size_t e = 0; e < menu.size(); ++e) {
