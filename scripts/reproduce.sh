@@ -145,8 +145,9 @@ if want optiodom; then
     calib "${args[0]}_custom" "$suite" "${args[@]:1}" --candidates "$out/candidates.yaml"
   done
   # Physics for the Ivanjko turns on the spot (candidates_spins.yaml: noise growing with the
-  # acceleration, the spin fraction or the turn rate; a wheelbase growing with the turn rate), on
-  # all the runs and on the two splits that miss the floor.
+  # acceleration, the spin fraction or the turn rate; a wheelbase growing with the turn rate;
+  # each wheel's scale backwards; a wheelbase that differs between left and right turns on the
+  # spot), on all the runs and on the two splits that miss the floor.
   for split in "${splits[@]}"; do
     read -r -a args <<<"$split"
     [[ ${args[0]} == all || ${args[0]} == hold_ivanjko || ${args[0]} == jun_to_dec ]] || continue
