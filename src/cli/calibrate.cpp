@@ -201,7 +201,7 @@ void write_holdout(std::ostream& out, const HoldoutSummary& h) {
     out << "\nHeld-out runs (never seen by the loop): the calibrated model cannot predict them at all, "
            "inconsistent: "
         << h.cannot_predict << "\n";
-    out << "  (the model was calibrated and is written; a custom expression of it is out of its range on these runs)\n";
+    out << "  (the model was calibrated and is written; the error above is what it meets on these runs)\n";
   } else {
     write_judged_holdout(out, h);
   }

@@ -638,8 +638,9 @@ CalibrateResult calibrate(const Suite& suite, const SuiteModel& start, const Cal
       out.holdout->refitted = refit_on_holdout(*holdout, judged, named_noise_level(out.named), options, progress);
       out.holdout->predictive = predict_holdout(suite, *holdout, out.model, named_noise_level(out.named));
     } catch (const InputError& e) {
-      // The held-out runs were read and checked when loaded: what fails now is the model's own
-      // expression on them. The calibration stands and is written; the hold-out says why it
+      // The held-out runs were read and checked when loaded (their size for the order too):
+      // what fails now is the calibrated model on them, in practice a custom expression of it
+      // out of its range there. The calibration stands and is written; the hold-out says why it
       // cannot be judged.
       out.holdout = unpredictable_holdout(*holdout, judged, e.what());
     }

@@ -34,10 +34,10 @@ NeesByKind nees_by_kind(const Suite& suite, const std::vector<double>& nees_mean
 
 /// A model judged on runs it was not fitted on.
 struct HoldoutSummary {
-  /// Where the model cannot predict the held-out runs at all (a custom expression of it leaves
-  /// its range on them: a noise factor fitted below 1 at the training runs' speeds, negative at
-  /// the held-out runs'), why; the comparison, NEES and fits below are then empty, and only the
-  /// experiments and their extrapolation are filled in. "" else.
+  /// Where the model cannot predict the held-out runs at all, why: the error it meets on them
+  /// (a custom expression of it out of its range there: a noise factor fitted below 1 at the
+  /// training runs' speeds, negative at the held-out runs'). The comparison, NEES and fits below
+  /// are then empty, and only the experiments and their extrapolation are filled in. "" else.
   std::string cannot_predict;
   Comparison comparison;
   ModelSummary summary;
