@@ -381,9 +381,15 @@ TEST(Calibrate, AModelThatCannotPredictTheHeldOutRunsIsStillWritten) {
   for (const NextExperiment& n : c.next_experiments) {
     EXPECT_EQ(n.experiment.path_yaml.find("speed: 0.6,"), std::string::npos) << n.experiment.name;
   }
-  bool menu_has_fast = false;
-  for (const MenuExperiment& m : experiment_menu(train)) menu_has_fast = menu_has_fast || m.path_yaml.find("speed: 0.6,") != std::string::npos;
-  EXPECT_TRUE(menu_has_fast);  // the filter was needed
+  // The items left out are named, with the error, and they are the 0.6 m/s ones.
+  ASSERT_FALSE(c.unpredictable_experiments.empty());
+  for (const UnpredictableExperiment& u : c.unpredictable_experiments) {
+    EXPECT_EQ(u.name.substr(u.name.size() - 6), "0.6mps") << u.name;
+    EXPECT_NE(u.why.find("must be >= 0"), std::string::npos) << u.why;
+  }
+  std::size_t fast_items = 0;
+  for (const MenuExperiment& m : experiment_menu(train)) fast_items += m.path_yaml.find("speed: 0.6,") != std::string::npos;
+  EXPECT_EQ(c.unpredictable_experiments.size(), fast_items);
 }
 
 TEST(Diagnose, AFoldThatLeavesTheModelUndeterminedTestsNothing) {

@@ -232,7 +232,7 @@ std::string report(const Suite& suite, const CalibrateResult& c, double alpha) {
         << " parameters beside the model's, so the next experiment is one that sizes "
         << (c.unresolved.size() == 1 ? "it" : "them") << ".\n";
   }
-  out << design_report(c.confounded, c.next_experiments);
+  out << design_report(c.confounded, c.next_experiments, c.unpredictable_experiments);
   if (c.holdout) write_holdout(out, *c.holdout);
   return out.str();
 }

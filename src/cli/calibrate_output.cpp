@@ -159,9 +159,15 @@ json correlation_json(const Eigen::MatrixXd& covariance) {
 
 }  // namespace
 
-std::string design_report(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next) {
+std::string design_report(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next,
+                          const std::vector<UnpredictableExperiment>& unpredictable) {
   std::ostringstream out;
   for (const ConfoundedPair& p : confounded) out << "\nConfounded: " << confounded_text(p) << "\n";
+  if (!unpredictable.empty()) {
+    out << "\nLeft out of the menu of next experiments, the model cannot predict them:";
+    for (const UnpredictableExperiment& u : unpredictable) out << (&u == &unpredictable.front() ? " " : ", ") << u.name;
+    out << " (" << unpredictable.front().name << ": " << unpredictable.front().why << ")\n";
+  }
   if (next.empty()) return out.str();
   out << "\nWhat to record next (information gain, D-optimality; standard errors to expect after it):\n";
   for (std::size_t i = 0; i < next.size() && i < kNextInReport; ++i) {
@@ -194,7 +200,8 @@ json fit_json(const FitResult& r) {
           {"at_bound", r.at_bound}};
 }
 
-json design_json(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next) {
+json design_json(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next,
+                 const std::vector<UnpredictableExperiment>& unpredictable) {
   json pairs = json::array();
   for (const ConfoundedPair& p : confounded) {
     pairs.push_back({{"a", p.a}, {"b", p.b}, {"correlation", p.correlation}, {"text", confounded_text(p)}});
@@ -207,7 +214,9 @@ json design_json(const std::vector<ConfoundedPair>& confounded, const std::vecto
     menu.push_back({{"name", n.experiment.name}, {"path", n.experiment.path_yaml}, {"runs", n.experiment.runs},
                     {"information_gain", n.information_gain}, {"expected_stderr", se}});
   }
-  return {{"confounded", pairs}, {"next_experiments", menu}};
+  json left_out = json::array();
+  for (const UnpredictableExperiment& u : unpredictable) left_out.push_back({{"name", u.name}, {"why", u.why}});
+  return {{"confounded", pairs}, {"next_experiments", menu}, {"unpredictable_experiments", left_out}};
 }
 
 namespace {
@@ -303,7 +312,7 @@ json calibrate_json(const Suite& suite, const SuiteModel& start, const Calibrate
                          {"joint_fit_adopted", c.joint_adopted}, {"joint_fit_note", c.joint_note}}},
               {"odometry_correction", correction_json(c.odometry_correction)},
               {"diff_drive", diff_drive_json(c.diff_drive)}};
-  out.update(design_json(c.confounded, c.next_experiments));
+  out.update(design_json(c.confounded, c.next_experiments, c.unpredictable_experiments));
   out["unresolved"] = c.unresolved;
   out["simplified"] = c.simplified;
   out["stand_ins"] = stand_ins_json(c.stand_ins);

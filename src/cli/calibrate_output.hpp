@@ -22,8 +22,10 @@ nlohmann::json folds_json(const Folds& folds);
 nlohmann::json fit_json(const FitResult& r);
 /// What the runs do not separate and what to record next, in words (the report's lines) and as
 /// {confounded, next_experiments}.
-std::string design_report(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next);
-nlohmann::json design_json(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next);
+std::string design_report(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next,
+                          const std::vector<UnpredictableExperiment>& unpredictable = {});
+nlohmann::json design_json(const std::vector<ConfoundedPair>& confounded, const std::vector<NextExperiment>& next,
+                           const std::vector<UnpredictableExperiment>& unpredictable = {});
 /// One diagnose round; `model` is the model the round started from (its candidates' YAML
 /// snippets add to it).
 nlohmann::json diagnosis_json(const Suite& suite, const SuiteModel& model, const Diagnosis& d);

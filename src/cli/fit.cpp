@@ -82,11 +82,12 @@ int run_fit(const FitOptions& opt) {
                             opt.exact ? FitPath::exact : FitPath::fast);
   bar.finish();
   const std::vector<ConfoundedPair> confounded = confounded_pairs(r.names, estimate_covariance(suite, r));
-  const std::vector<NextExperiment> next = next_experiments(suite, r);
-  std::cout << fit_report(suite, r) << design_report(confounded, next);
+  std::vector<UnpredictableExperiment> unpredictable;
+  const std::vector<NextExperiment> next = next_experiments(suite, r, &unpredictable);
+  std::cout << fit_report(suite, r) << design_report(confounded, next, unpredictable);
   if (!opt.json.empty()) {
     json doc = fit_json(r);
-    doc.update(design_json(confounded, next));
+    doc.update(design_json(confounded, next, unpredictable));
     write_json_atomic(opt.json, doc);
   }
   return kExitOk;

@@ -449,7 +449,7 @@ void account(const Suite& suite, const CalibrateOptions& options, DiagnoseProgre
   FitResult at = design_point(out);
   if (at.names.empty()) return;
   out.confounded = confounded_pairs(at.names, estimate_covariance(suite, at));
-  out.next_experiments = next_experiments(suite, at);
+  out.next_experiments = next_experiments(suite, at, &out.unpredictable_experiments);
 }
 
 /// The model's covariance of the end-pose error after `length_m` of straight line at

@@ -528,24 +528,32 @@ Suite menu_suite(const Suite& suite, const std::vector<MenuExperiment>& menu) {
 /// The sensitivities of the menu items, or none where the model cannot predict one of them: a
 /// custom expression of it may leave its range there (a noise factor fitted below 1 at the
 /// suite's speeds, negative at a faster one), at the fitted values or a difference step away.
+/// `why` (when given) receives the error.
 std::optional<Sensitivities> menu_sensitivities(const Suite& suite, const std::vector<MenuExperiment>& menu,
-                                                const FitResult& fit) {
+                                                const FitResult& fit, std::string* why = nullptr) {
   try {
     return sensitivities(menu_suite(suite, menu), fit.model, fit.names);
-  } catch (const InputError&) {
+  } catch (const InputError& e) {
+    if (why) *why = e.what();
     return std::nullopt;
   }
 }
 
 }  // namespace
 
-std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit) {
+std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit,
+                                             std::vector<UnpredictableExperiment>* unpredictable) {
   std::vector<MenuExperiment> menu = experiment_menu(suite);
   std::optional<Sensitivities> sens = menu_sensitivities(suite, menu, fit);
   if (!sens) {  // the items the model cannot predict, each tried alone, leave the menu
     std::vector<MenuExperiment> predictable;
     for (MenuExperiment& m : menu) {
-      if (menu_sensitivities(suite, {m}, fit)) predictable.push_back(std::move(m));
+      std::string why;
+      if (menu_sensitivities(suite, {m}, fit, &why)) {
+        predictable.push_back(std::move(m));
+      } else if (unpredictable) {
+        unpredictable->push_back({m.name, why});
+      }
     }
     menu = std::move(predictable);
     sens = sensitivities(menu_suite(suite, menu), fit.model, fit.names);

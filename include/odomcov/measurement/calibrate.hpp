@@ -163,6 +163,7 @@ struct CalibrateResult {
   std::vector<std::string> unresolved;
   std::vector<ConfoundedPair> confounded;
   std::vector<NextExperiment> next_experiments;  // best first
+  std::vector<UnpredictableExperiment> unpredictable_experiments;  // menu items it cannot predict
   DiffDriveParameters diff_drive;
   std::optional<HoldoutSummary> holdout;
 };

@@ -131,9 +131,18 @@ struct PredictiveCheck {
 /// The check of `runs` (with its own measurement noise) against `uncertainty.model`.
 PredictiveCheck predictive_check(const Suite& runs, const TrainingUncertainty& uncertainty);
 
+/// A menu item the model cannot predict, and the error it meets there (a custom expression of
+/// it out of its range: a noise factor fitted below 1 at the suite's speeds, negative at a
+/// faster one).
+struct UnpredictableExperiment {
+  std::string name, why;
+};
+
 /// The menu ranked by information_gain for the fit's parameters at its model (the current
 /// information: fisher_information of the suite), best first; experiments that add the same
-/// information as one ranked earlier (a speed the model does not depend on) are left out.
-std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit);
+/// information as one ranked earlier (a speed the model does not depend on) are left out, and
+/// so are those the model cannot predict (listed in `unpredictable` when given).
+std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult& fit,
+                                             std::vector<UnpredictableExperiment>* unpredictable = nullptr);
 
 }  // namespace odomcov
