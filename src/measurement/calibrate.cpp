@@ -577,10 +577,6 @@ HoldoutSummary::Predictive predict_holdout(const Suite& training, const Suite& h
   return out;
 }
 
-}  // namespace
-
-namespace {
-
 /// The hold-out of a model that cannot predict the held-out runs, and why (`why`): their
 /// experiments and where they lie outside the training domain, nothing judged.
 HoldoutSummary unpredictable_holdout(const Suite& holdout, const SuiteModel& model, const std::string& why) {

@@ -579,11 +579,8 @@ FitResult fit_fast(SuiteModel model, const std::vector<Handle>& handles,
   };
   auto exact = [&](const std::vector<double>& x) {
     apply(model, handles, x.data());
-    try {
-      return -negative_sum(run_log_likelihoods(cache.at(model, counter), scatter));
-    } catch (const InputError&) {  // a custom expression not finite at a trial point: a wall
-      return -1e300;
-    }
+    const Residuals* r = residuals_or_wall(cache, model, counter);
+    return r ? -negative_sum(run_log_likelihoods(*r, scatter)) : -1e300;  // a wall for the optimiser
   };
   double ll = exact(u);
   apply(model, handles, u.data());

@@ -147,7 +147,6 @@ void describe_fit(const Suite& suite, const CandidateType& type, Eigen::Index of
   c.stderrs = stderrs;
 }
 
-
 /// The group_variation candidate varying `target` ("wheelbase_error.Eb"): it fits the varied
 /// parameter too when its effect is not in the model yet (joining at its neutral value), and
 /// group_variation's sd; it reads as group_variation's physics and
@@ -330,6 +329,9 @@ struct Round {
   BaseFeature scatter_feature = {};  // the base's most significant scatter feature (scatter_shape)
   std::uint64_t seed = kDefaultRefereeSeed;  // the referee's, for match_tails' simulated worlds
   BaseFeature run_feature = {};  // the base's most significant run feature (run_by_run)
+  /// The base's own world has heavy tails (heavy_tailed_effect: bumps): tails_scale applies
+  /// whatever the kurtosis test says.
+  bool heavy_tailed_world = false;
 
   std::atomic<std::int64_t>* counter() const { return progress ? &progress->evaluations : nullptr; }
   /// Throws Cancelled when the caller asked to stop.
@@ -345,6 +347,7 @@ Round start_round(const Suite& suite, const SuiteModel& model, const Comparison&
                   bool heavy_tails, DiagnoseProgress* progress, FitPath path, ResidualCache& cache) {
   Round round{suite, before, heavy_tails, progress, path, cache, split_fitted_names(model.effects),
               refit(suite, model, progress, path, cache).model};  // the rest as declared
+  round.heavy_tailed_world = heavy_tailed_effect(round.base.effects);
   const auto& base_residuals = cache.at(round.base);
   round.base_full = log_likelihood(base_residuals);
   round.base_scatter = scatter_log_likelihood(base_residuals);
@@ -470,7 +473,7 @@ void confounding(const FitResult& fit, std::size_t first, Candidate& c) {
 /// candidate of a round whose errors are not heavy-tailed (neither against the model by the
 /// kurtosis test nor in the model's own world: heavy_tailed_effect); c is never taken below 1.
 double tails_scale(const Round& round, const Trial& t) {
-  const bool gaussian = !round.heavy_tails && !heavy_tailed_effect(round.base.effects);
+  const bool gaussian = !round.heavy_tails && !round.heavy_tailed_world;
   if (gaussian || t.type->systematic || t.fit.robust_stderrs.size() != t.fit.stderrs.size()) return 1.0;
   const Eigen::Index own = static_cast<Eigen::Index>(t.type->fitted.size());
   const Eigen::Index first = static_cast<Eigen::Index>(t.fit.names.size()) - own;
