@@ -175,7 +175,8 @@ if want optiodom; then
     "all (day groups)=$suite-calibrate-all_day"
   # In-sample reach: how near 3 the model family gets on the runs a hold-out judges (the Ivanjko
   # paths, each campaign) when it has seen them: the all-runs model, its effects refitted on them,
-  # and calibrate on them alone.
+  # and calibrate on them alone; then what the training runs of the two hold-outs that miss their
+  # floors say about the parameter they need (a profile of the all-runs model on them).
   save "$out/reach.md" "$python" scripts/optiodom_reach.py "$odomcov" "$suite" "$out/model_all.yaml" \
     "$out/calibrate_all.json" "$suite-reach"
 fi
