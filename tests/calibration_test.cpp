@@ -1,8 +1,11 @@
 // compare, fit and UMBmark on synthesised suites whose truth is known.
 #include "odomcov/measurement/calibration.hpp"
 #include "odomcov/measurement/comparison.hpp"
+#include "odomcov/measurement/likelihood.hpp"
 
 #include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
 
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/normal.hpp>
@@ -60,6 +63,80 @@ TEST(Compare, PlainWorldIsConsistentAndHiddenEffectsAreNamed) {
   SuiteModel informed = suite_model(lab);
   informed.effects = {{"wheel_diameter_ratio", {1.003}}, {"wheelbase_error", {1.01}}};
   EXPECT_EQ(compare(lab, informed, kAlpha).verdict, "consistent");
+}
+
+TEST(Compare, AMeanTestFailingOnACombinationNamesThePairNotOneAxis) {
+  // An 8 m line, whose predicted y and theta errors are strongly correlated. 30 runs built so
+  // that their sample covariance is the predicted one exactly and their mean is off by 2.5
+  // standard errors in y and in theta, in the directions the correlation makes unlikely: each
+  // component alone is within its test's level (Student t, 29 dof: p = 0.018 against
+  // alpha_per_test), the two together are far off, and Hotelling's test fails. The failure
+  // names the pair, with the joint statistic sqrt(d' C^-1 d) computed here independently.
+  const WorldFile w = load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml");
+  Suite s;
+  s.file = "in-memory";
+  s.name = "joint";
+  s.robot = w.robot;
+  s.measurement_noise = w.measurement_noise;
+  SuiteExperiment ex;
+  ex.name = "line-8m";
+  ex.path = w.experiments.at(1).path;
+  ASSERT_EQ(w.experiments.at(1).name, "line-8m");
+  constexpr int kCopies = 5, kRuns = 6 * kCopies;
+  for (int r = 0; r < kRuns; ++r) ex.runs.push_back({std::to_string(r + 1), Vector3::Zero(), {}, {}});
+  s.experiments.push_back(ex);
+  const ExperimentComparison zero = compare(s, suite_model(s), 0.01).experiments.at(0);
+  const Matrix3 P = zero.predicted_cov;
+  const Vector3 odometry = -zero.errors.at(0);  // error = measured - odometry (no wrap near 0)
+  const double n = kRuns;
+  const double rho = P(1, 2) / std::sqrt(P(1, 1) * P(2, 2));
+  ASSERT_GT(std::abs(rho), 0.5);
+  const Matrix3 L = P.llt().matrixL();
+  const double a = std::sqrt((n - 1.0) / (2.0 * kCopies));  // sample covariance = P exactly
+  const Vector3 offset(0.0, 2.5 * std::sqrt(P(1, 1) / n), -2.5 * (rho > 0 ? 1.0 : -1.0) * std::sqrt(P(2, 2) / n));
+  for (int r = 0; r < kRuns; ++r) {
+    const int j = (r / 2) % 3;
+    s.experiments[0].runs[static_cast<std::size_t>(r)].measured =
+        odometry + zero.predicted_mean + (r % 2 == 0 ? a : -a) * L.col(j) + offset;
+  }
+  const Comparison c = compare(s, suite_model(s), 0.01);
+  const ExperimentComparison& e = c.experiments.at(0);
+  ASSERT_LT(e.mean_test.p_value, c.alpha_per_test);
+  EXPECT_NEAR(std::abs(e.mean_t(1)), 2.5, 1e-9);
+  EXPECT_NEAR(std::abs(e.mean_t(2)), 2.5, 1e-9);
+  for (int k = 0; k < 3; ++k) ASSERT_GT(e.mean_p(k), c.alpha_per_test) << k;
+  const double expected = std::sqrt((2.0 * 2.5 * 2.5 + 2.0 * std::abs(rho) * 2.5 * 2.5) / (1.0 - rho * rho));
+  EXPECT_NEAR(e.joint_mean_t(1, 2), expected, 1e-9 * expected);
+  EXPECT_NEAR(e.mean_correlation(1, 2), rho, 1e-9);
+  ASSERT_FALSE(c.failures.empty());
+  const Failure& f = c.failures.front();
+  EXPECT_EQ(f.kind, Failure::Kind::joint_mean);
+  EXPECT_EQ(f.component, 1);
+  EXPECT_EQ(f.other, 2);
+}
+
+TEST(Compare, RunsThatAreAllAlikeHaveNoKurtosisAndAreInconsistent) {
+  // 30 runs with the same end pose (a copied row, a deterministic simulator): their residuals
+  // have no spread, so no kurtosis; compare used to end in a NaN inside Mardia's test (an
+  // internal error). Now the kurtosis test is absent, and the covariance test rejects.
+  const WorldFile w = load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml");
+  Suite s;
+  s.file = "in-memory";
+  s.name = "alike";
+  s.robot = w.robot;
+  s.measurement_noise = w.measurement_noise;
+  SuiteExperiment ex;
+  ex.name = "line-8m";
+  ex.path = w.experiments.at(1).path;
+  for (int r = 0; r < 30; ++r) ex.runs.push_back({std::to_string(r + 1), Vector3(8.001, 0.002, 1e-4), {}, {}});
+  s.experiments.push_back(ex);
+  Comparison c;
+  ASSERT_NO_THROW(c = compare(s, suite_model(s), 0.01));
+  EXPECT_FALSE(c.kurtosis.valid);
+  EXPECT_EQ(c.verdict, "inconsistent");
+  EXPECT_FALSE(c.experiments.at(0).mean_test.valid);  // Hotelling needs a spread too
+  // tails_test pools nothing either (the replicates pool what the data pool).
+  EXPECT_EQ(tails_test(s, suite_model(s), residuals(s, suite_model(s)), 19, 1).experiments, 0);
 }
 
 TEST(Fit, RecoversWheelNoiseWithinItsStandardErrors) {

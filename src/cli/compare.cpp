@@ -89,7 +89,7 @@ std::string comparison_text(const Suite& suite, const Comparison& c) {
                                       ? ", the model's world " + fixed(c.mardia_model, 2)
                                       : std::string()) +
                                  "), p = " + sci(c.kurtosis.p_value, 2)
-                           : std::string("n/a (no experiment has 10 runs)"))
+                           : "n/a (" + no_kurtosis_reason(suite) + ")")
       << "\nverdict: " << c.verdict << "\n";
   std::size_t outside = 0;
   for (const ExperimentComparison& e : c.experiments) outside += e.extrapolation.empty() ? 0 : 1;

@@ -7,6 +7,7 @@
 
 #include "commands.hpp"
 #include "calibrate_output.hpp"
+#include "failures.hpp"
 #include "odomcov/measurement/config.hpp"
 #include "odomcov/measurement/diagnosis.hpp"
 #include "odomcov/base/format.hpp"
@@ -106,7 +107,7 @@ void write_ranking(std::ostream& out, const Suite& suite, const Diagnosis& d) {
       << "tails: " << (d.kurtosis.valid ? std::string(d.heavy_tails ? "heavy" : "Gaussian") +
                                               " (Mardia kurtosis z = " + fixed(d.kurtosis.statistic, 2) +
                                               ", p = " + sci(d.kurtosis.p_value, 2) + ")"
-                                        : std::string("not testable (no experiment has 10 runs)"))
+                                        : "not testable (" + no_kurtosis_reason(suite) + ")")
       << "\n\n";
   int width = 24;  // wider for group_variation(<effect>.<parameter>)
   for (const Candidate& c : d.candidates) width = std::max(width, static_cast<int>(c.effect.size()));

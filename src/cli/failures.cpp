@@ -34,6 +34,18 @@ std::string failure_text(const Comparison& c, const Failure& f) {
       return head + kComponent[k] + " mean " + format_number(e.measured.mean(k), "%.4g") + " " +
              kUnit[k] + ", " + format_number(std::abs(e.mean_t(k)), "%.1f") +
              " standard errors from the predicted " + format_number(e.predicted_mean(k), "%.4g");
+    case Failure::Kind::joint_mean: {
+      const int b = f.other;
+      auto part = [&e](int i) {
+        return std::string(kComponent[i]) + " mean " + format_number(e.measured.mean(i), "%.4g") + " " + kUnit[i] +
+               " against " + format_number(e.predicted_mean(i), "%.4g");
+      };
+      return head + kComponent[k] + " and " + kComponent[b] + " means together " +
+             format_number(e.joint_mean_t(k, b), "%.1f") +
+             " standard errors off the prediction, though " + format_number(std::abs(e.mean_t(k)), "%.1f") +
+             " and " + format_number(std::abs(e.mean_t(b)), "%.1f") + " alone (their errors correlate at " +
+             format_number(e.mean_correlation(k, b), "%.2f") + "): " + part(k) + ", " + part(b);
+    }
     case Failure::Kind::variance:
       return head + kComponent[k] + " variance " + format_number(e.variance_ratio(k), "%.2g") +
              "x predicted";
@@ -45,6 +57,16 @@ std::string failure_text(const Comparison& c, const Failure& f) {
       return head + "errors " + format_number(std::sqrt(e.nees_mean / 3.0), "%.2g") +
              "x the predicted spread (NEES " + format_number(e.nees_mean, "%.3g") + " per run against 3)";
   }
+}
+
+std::string no_kurtosis_reason(const Suite& suite) {
+  for (const SuiteExperiment& e : suite.experiments) {
+    if (static_cast<std::int64_t>(e.runs.size()) >= kMinRunsForLrt) {
+      return "no experiment of " + std::to_string(kMinRunsForLrt) +
+             " runs or more has whitened errors that spread in all three components";
+    }
+  }
+  return "no experiment has " + std::to_string(kMinRunsForLrt) + " runs";
 }
 
 std::vector<std::string> failure_texts(const Comparison& c) {

@@ -16,4 +16,7 @@ std::string failure_text(const Comparison& c, const Failure& f);
 /// Every failure of the comparison, worst first (docs/json.md, "compare": failures).
 std::vector<std::string> failure_texts(const Comparison& c);
 
+/// Why a comparison of the suite has no kurtosis test (Comparison::kurtosis not valid), in words.
+std::string no_kurtosis_reason(const Suite& suite);
+
 }  // namespace odomcov::cli

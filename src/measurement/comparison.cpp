@@ -23,8 +23,6 @@ namespace odomcov {
 namespace {
 
 constexpr int kDim = 3;
-/// The LRT's Bartlett-corrected chi^2 is accurate from about ten runs; below, the NEES test.
-constexpr std::int64_t kMinRunsForLrt = 10;
 /// tails_test pools every experiment whose b2 varies: n >= p + 2 runs (with p + 1 the
 /// standardised runs form a simplex and b2 is fixed).
 constexpr std::size_t kMinRunsForTails = kDim + 2;
@@ -162,13 +160,15 @@ ExperimentTests experiment_tests(const Vector3* z, std::size_t count) {
 }
 
 /// Mardia's multivariate kurtosis b2 [Mardia70] of one experiment's whitened residuals z, each
-/// standardised by the experiment's own mean and (maximum-likelihood) covariance.
+/// standardised by the experiment's own mean and (maximum-likelihood) covariance. NaN when that
+/// covariance is singular (runs all alike, or on a plane): such residuals have no shape to test.
 double mardia_b2(const Vector3* z, std::size_t count) {
   const double n = static_cast<double>(count);
   MomentAccumulator acc;
   for (std::size_t i = 0; i < count; ++i) acc.add(z[i]);
   const Matrix3 S = acc.covariance() * ((n - 1) / n);
   const Eigen::LLT<Matrix3> llt(S);
+  if (llt.info() != Eigen::Success || !S.allFinite()) return kNaN;
   double b2 = 0.0;
   for (std::size_t i = 0; i < count; ++i) {
     const Vector3 d = z[i] - acc.mean();
@@ -184,9 +184,11 @@ double mardia_b2(const Vector3* z, std::size_t count) {
 struct KurtosisPool {
   double excess = 0.0, variance = 0.0, weight = 0.0, b2_sum = 0.0, expected_sum = 0.0;
 
-  void add(const Vector3* z, std::size_t count) {
+  /// Adds one experiment; false (and nothing added) when its kurtosis does not exist (mardia_b2).
+  bool add(const Vector3* z, std::size_t count) {
     const double n = static_cast<double>(count);
     const double b2 = mardia_b2(z, count);
+    if (!std::isfinite(b2)) return false;
     constexpr double p = kDim;
     const double expected = p * (p + 2) * (n - 1) / (n + 1);
     const double var = 8 * p * (p + 2) * (n - 3) * (n - p - 1) * (n - p + 1) /
@@ -196,6 +198,7 @@ struct KurtosisPool {
     weight += n;
     b2_sum += n * b2;
     expected_sum += n * expected;
+    return true;
   }
   /// The pooled test (two-sided normal); not valid when no experiment is large enough.
   TestResult test() const {
@@ -240,6 +243,9 @@ double signed_chi2_score(double x, double dof) {
 struct TestLayout {
   std::vector<bool> valid, two_sided;
   std::vector<std::uint8_t> testable;  // per experiment
+  /// Per experiment: whether the kurtosis pools it (enough runs, and the data's residuals have
+  /// a kurtosis: KurtosisPool::add), the same experiments in the data and every replicate.
+  std::vector<std::uint8_t> pooled;
   std::size_t size() const { return valid.size(); }
   int count() const { return static_cast<int>(std::count(valid.begin(), valid.end(), true)); }
 };
@@ -280,7 +286,7 @@ void scores(const Prepared& p, const TestLayout& layout, const Vector3* errors, 
     out[2 * e + 1] = !t.cov.valid ? kNaN
                      : t.lrt      ? upper_score(t.cov.p_value)
                                   : signed_chi2_score(t.cov.statistic, t.cov.dof);
-    if (n >= static_cast<std::size_t>(kMinRunsForLrt)) pool.add(z, n);
+    if (layout.pooled[e]) pool.add(z, n);
   }
   const TestResult k = pool.test();
   out[2 * E] = k.valid ? clamp_score(k.statistic) : kNaN;
@@ -307,6 +313,8 @@ void predicted_block(const std::vector<RunResidual>& own, ExperimentComparison& 
 /// else the predicted one (normal); the variance ratio with its two-sided chi^2 p-value.
 void component_tests(const SampleMoments& r, const Matrix3& mean_cov, ExperimentComparison& c) {
   const double n = static_cast<double>(c.n);
+  c.mean_residual = r.mean;
+  c.mean_residual_cov = (c.n > kDim && r.cov.diagonal().minCoeff() > 0 ? r.cov : mean_cov) / n;
   for (int k = 0; k < kDim; ++k) {
     const double sd = std::sqrt(std::max(r.cov(k, k), 0.0));
     const bool own_se = c.n > kDim && sd > 0;
@@ -373,14 +381,27 @@ ExperimentComparison compare_experiment(const SuiteExperiment& ex, const Prepare
 
 // ---- Where it fails --------------------------------------------------------------------------
 
-/// The mean failures of an experiment whose mean test fails: its worst component, and every
-/// other component significant on its own.
+/// The mean failures of an experiment whose mean test fails: every component significant on
+/// its own (in order x, y, theta); when none is (the test failed on a combination: two means each
+/// within their standard errors whose errors the covariance ties together), the pair of
+/// components whose joint_mean_t is largest; with no such pair, the worst component alone.
 void add_mean_failures(const ExperimentComparison& c, int index, double alpha_test, std::vector<Failure>& out) {
   int worst = 0;
   for (int k = 1; k < kDim; ++k) worst = c.mean_p(k) < c.mean_p(worst) ? k : worst;
+  if (!(c.mean_p(worst) < alpha_test)) {
+    Failure pair{Failure::Kind::joint_mean, index, 0, 0};
+    double most = std::abs(c.mean_t(worst));
+    for (int a = 0; a < kDim; ++a) {
+      for (int b = a + 1; b < kDim; ++b) {
+        const double t = c.joint_mean_t(a, b);
+        if (t > most) most = t, pair.component = a, pair.other = b;
+      }
+    }
+    out.push_back(pair.component != pair.other ? pair : Failure{Failure::Kind::mean, index, worst, worst});
+    return;
+  }
   for (int k = 0; k < kDim; ++k) {
-    if (k != worst && !(c.mean_p(k) < alpha_test)) continue;
-    out.push_back({Failure::Kind::mean, index, k, k});
+    if (k == worst || c.mean_p(k) < alpha_test) out.push_back({Failure::Kind::mean, index, k, k});
   }
 }
 
@@ -895,14 +916,14 @@ TailsTest tails_test(const Suite& suite, const SuiteModel& model,
                      const std::vector<std::vector<RunResidual>>& residuals, int replicates, std::uint64_t seed) {
   TailsTest out;
   const Prepared p = prepare(residuals);
-  const std::vector<std::uint8_t> pooled = pooled_experiments(p, kMinRunsForTails);
+  std::vector<std::uint8_t> pooled = pooled_experiments(p, kMinRunsForTails);
   Workspace ws;
   whiten_data(p, residuals, ws);
   KurtosisPool data;
   for (std::size_t e = 0; e < p.experiments(); ++e) {
-    if (!pooled[e]) continue;
-    data.add(ws.z.data() + p.first[e], p.runs_of(e));
-    ++out.experiments;
+    // The replicates pool what the data pool: not an experiment whose residuals have no kurtosis.
+    pooled[e] = pooled[e] && data.add(ws.z.data() + p.first[e], p.runs_of(e));
+    out.experiments += pooled[e];
   }
   if (out.experiments == 0 || replicates < 1) return out;
   std::vector<double> b2;
@@ -941,6 +962,19 @@ double ExperimentComparison::predicted_correlation(int a, int b) const {
   return predicted_cov(a, b) / std::sqrt(predicted_cov(a, a) * predicted_cov(b, b));
 }
 
+double ExperimentComparison::joint_mean_t(int a, int b) const {
+  const double caa = mean_residual_cov(a, a), cbb = mean_residual_cov(b, b), cab = mean_residual_cov(a, b);
+  const double det = caa * cbb - cab * cab;
+  if (!(caa > 0.0 && cbb > 0.0 && det > 1e-12 * caa * cbb)) return 0.0;
+  const double da = mean_residual(a), db = mean_residual(b);
+  const double d2 = (cbb * da * da - 2.0 * cab * da * db + caa * db * db) / det;
+  return std::sqrt(std::max(d2, 0.0));
+}
+
+double ExperimentComparison::mean_correlation(int a, int b) const {
+  return mean_residual_cov(a, b) / std::sqrt(mean_residual_cov(a, a) * mean_residual_cov(b, b));
+}
+
 Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
                    const CalibrationOptions& calibration) {
   return compare(suite, model, alpha, residuals(suite, model), calibration);
@@ -971,8 +1005,8 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
     layout.valid.push_back(c.cov_test.valid);
     layout.two_sided.push_back(false);
     layout.two_sided.push_back(c.cov_method == "nees");
-    if (c.cov_method == "none" || p.runs_of(e) < static_cast<std::size_t>(kMinRunsForLrt)) continue;
-    pool.add(z, p.runs_of(e));
+    layout.pooled.push_back(c.cov_method != "none" && p.runs_of(e) >= static_cast<std::size_t>(kMinRunsForLrt) &&
+                            pool.add(z, p.runs_of(e)));
   }
   out.kurtosis = pool.test();
   out.mardia_b2 = pool.b2();

@@ -44,6 +44,12 @@ struct ExperimentComparison {
   // Per component (x, y, theta), for the failures:
   Vector3 mean_t = Vector3::Zero();        // (measured - predicted mean)/standard error
   Vector3 mean_p = Vector3::Ones();        // Student-t p-values
+  /// The mean residual (measured - predicted, each run conditioned on its group's earlier runs)
+  /// and its covariance: the sample's own over n when the experiment is large enough for
+  /// Hotelling and every component spreads, else the predicted one over n (as mean_t's standard
+  /// errors are taken).
+  Vector3 mean_residual = Vector3::Zero();
+  Matrix3 mean_residual_cov = Matrix3::Zero();
   Vector3 variance_ratio = Vector3::Ones();  // measured / predicted variance
   Vector3 variance_p = Vector3::Ones();    // chi^2 p-values (two-sided)
   /// With a model that records its training domain (SuiteModel::domain): where this
@@ -53,6 +59,14 @@ struct ExperimentComparison {
   /// Correlation of components a and b (0 x, 1 y, 2 theta), measured and predicted.
   double measured_correlation(int a, int b) const;
   double predicted_correlation(int a, int b) const;
+  /// Components a and b's means taken together: how many standard errors the worst linear
+  /// combination of the two is off the prediction, sqrt(d' C^-1 d) with d their mean residuals
+  /// and C their block of mean_residual_cov; 0 when C is singular. At least the larger |mean_t|
+  /// of the two, and far more when the two means' errors are correlated and the residuals go
+  /// against it.
+  double joint_mean_t(int a, int b) const;
+  /// The correlation of components a and b's mean errors (in mean_residual_cov).
+  double mean_correlation(int a, int b) const;
 };
 
 /// One way the model fails the data, as data; the command line and the Python module put it
@@ -60,6 +74,8 @@ struct ExperimentComparison {
 struct Failure {
   enum class Kind {
     mean,         // experiment's mean of `component` off the prediction (mean_t, mean_p)
+    joint_mean,   // the mean test fails with no component off on its own: the means of
+                  // (component, other) together, the pair whose joint_mean_t is largest
     variance,     // its variance off (variance_ratio, variance_p)
     correlation,  // the covariance test fails with no variance off: the correlation of
                   // (component, other) differs most
@@ -162,6 +178,11 @@ Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
 Comparison compare(const Suite& suite, const SuiteModel& model, double alpha,
                    const std::vector<std::vector<RunResidual>>& residuals,
                    const CalibrationOptions& calibration = {});
+
+/// compare's covariance test is the likelihood ratio (its Bartlett-corrected chi^2 is accurate
+/// from about ten runs) in an experiment of this many runs or more, else the NEES test; its
+/// kurtosis test pools such experiments only.
+inline constexpr std::int64_t kMinRunsForLrt = 10;
 
 /// The data's tails against the model's own world, for a decision that compare's kurtosis test
 /// cannot make (it pools only experiments of kMinRunsForLrt runs or more, and a lab of a few runs
