@@ -11,6 +11,7 @@
 
 #include "odomcov/base/error.hpp"
 #include "odomcov/base/format.hpp"
+#include "odomcov/closed_form/limits.hpp"
 #include "odomcov/measurement/likelihood.hpp"
 #include "odomcov/measurement/residual_features.hpp"
 
@@ -262,6 +263,10 @@ std::vector<double> speeds_of(const Suite& suite) {
   }
   std::vector<double> speeds(planned.begin(), planned.end());
   if (logged || speeds.empty() || speeds.size() > 3) speeds = {std::stod(format_number(median(runs), "%.3g"))};
+  // Runs that do not move (a robot standing still) give no speed to plan at: no menu.
+  speeds.erase(std::remove_if(speeds.begin(), speeds.end(), [](double v) { return !(v > 0.0 && std::isfinite(v)); }),
+               speeds.end());
+  if (speeds.empty()) return speeds;
   const double slow = 0.5 * speeds.front(), fast = 2.0 * speeds.back();
   speeds.push_back(slow);  // the suite's own speeds first: they win ties
   speeds.push_back(fast);
@@ -356,6 +361,9 @@ std::vector<MenuExperiment> experiment_menu(const Suite& suite) {
       m.name = r.name + "-" + format_number(speed, "%.3g") + "mps";
       m.path.sample_rate_hz = rate;
       m.path.keyframes = keyframes_from_segments(r.segments, suite.robot.wheelbase_m, speed);
+      // A path the input limits would refuse (so slow that it needs more samples than a run may
+      // have) is no experiment to record.
+      if (!limits::check_path(m.path, suite.robot.wheelbase_m).empty()) continue;
       m.path_yaml = "{sample_rate: " + format_number(rate, "%.6g") + ", speed: " + format_number(speed, "%.6g") +
                     ", segments: [" + r.segments_yaml + "]}";
       m.runs = runs;
