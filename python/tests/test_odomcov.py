@@ -125,6 +125,16 @@ def test_suite_commands(tmp_path):
         odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "nan.yaml"))
 
 
+def test_degenerate_fits_say_no_standard_error_rather_than_nan():
+    # Ten runs with no heavy tails: the bumps candidate's rate fits at 0, where the likelihood
+    # gives no standard error; its explanation says so in words (it printed "+/- nan").
+    suite = odomcov.load_suite(os.path.join(ROOT, "tests", "data", "suites", "bumps_rate_zero.yaml"))
+    d = odomcov.diagnose(suite)
+    bumps = next(c for c in d["candidates"] if c["effect"] == "bumps")
+    assert "rate sigma^2 = 0 m (no standard error; " in bumps["explanation"]
+    assert all("nan" not in c["explanation"] for c in d["candidates"])
+
+
 def test_calibrate_gives_calibrate_json():
     # A small logged suite (one experiment of two runs: nothing to cross-validate): the keys of
     # calibrate.json, its own runs as held-out runs inside its training domain, bad arguments.

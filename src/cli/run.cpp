@@ -16,6 +16,9 @@
 namespace odomcov::cli {
 namespace {
 
+/// The NEES mean in words: "n/a" where the predicted covariance cannot whiten (untestable).
+std::string nees_text(double nees) { return std::isfinite(nees) ? fixed(nees, 4) : std::string("n/a"); }
+
 struct RunOptions {
   std::string config;
   std::optional<std::int64_t> runs;
@@ -69,7 +72,7 @@ std::string report(const Config& config, const Validation& v, int threads) {
       << ")\n"
       << "  mean (chi^2, theory covariance):          " << test_text(v.mean_test) << "\n"
       << "  " << cov_test_name(v.order) << test_text(v.cov_test) << "\n"
-      << "  mean NEES:                                " << fixed(v.nees_mean, 4)
+      << "  mean NEES:                                " << nees_text(v.nees_mean)
       << " (expected 3)\n"
       << "verdict: " << v.verdict << " (order " << v.order << ")\n\n";
   const OrderResult& o = v.other;
@@ -80,7 +83,7 @@ std::string report(const Config& config, const Validation& v, int threads) {
   if (o.order == 2) {
     out << "  covariance (LRT, Gaussian, for reference): " << test_text(o.cov_lrt) << "\n";
   }
-  out << "  mean NEES: " << fixed(o.nees_mean, 4) << "; verdict (order " << o.order
+  out << "  mean NEES: " << nees_text(o.nees_mean) << "; verdict (order " << o.order
       << "): " << o.verdict << "\n\n"
       << "Beyond the continuous first-order theory (information, not part of the verdict):\n"
       << "  noise-induced mean (exact for the Gaussian heading error of white wheel noise):\n"

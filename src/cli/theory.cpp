@@ -1,4 +1,5 @@
 // odomcov theory CONFIG [--json FILE]: the closed form at every keyframe ([Kleeman95] Tables I-II).
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <sstream>
@@ -53,6 +54,10 @@ std::vector<AlongPoint> along_path(const Config& config, double every) {
 }
 
 constexpr double kRadToDeg = 180.0 / M_PI;
+
+/// A standard deviation from a variance that rounding may leave a hair below 0 (a wheel that
+/// pivots leaves one component's variance at 0: -1.6e-25 m^2 after the world-frame transforms).
+double sd(double variance) { return std::sqrt(std::max(variance, 0.0)); }
 
 /// A heading for display: wrapped to (-180, 180] deg, and no "-0.00" for a rounding residue.
 double display_deg(double heading_rad) {
@@ -140,7 +145,7 @@ int run_theory(const TheoryOptions& opt) {
       char line[200];
       std::snprintf(line, sizeof line, "  %9.3f %9.3f %9.4f %9.4f %12.2f %10.4e %11.4e %15.4e\n", p.s_m,
                     p.t_s, p.pose.x(), p.pose.y(), display_deg(p.pose.z()),
-                    std::sqrt(p.P(0, 0)), std::sqrt(p.P(1, 1)), std::sqrt(p.P(2, 2)));
+                    sd(p.P(0, 0)), sd(p.P(1, 1)), sd(p.P(2, 2)));
       out << line;
       along.push_back({{"s", p.s_m}, {"t", p.t_s}, {"pose", to_json(p.pose)}, {"cov", to_json(p.P)}});
     }

@@ -127,8 +127,9 @@ std::string complete_bumps(const std::vector<ObservedExperiment>& data, EffectSp
   const double s = std::isfinite(sigma) ? sigma : sigma_fixed;
   spec.values = {q / (s * s), s};
   stderrs = {q_se / (s * s), std::numeric_limits<double>::quiet_NaN()};
-  return "rate sigma^2 = " + format_number(q, "%.3g") + " +/- " + format_number(q_se, "%.1g") +
-         " m (what the means and covariances determine); " +
+  return "rate sigma^2 = " + format_number(q, "%.3g") +
+         (std::isfinite(q_se) ? " +/- " + format_number(q_se, "%.1g") + " m (" : std::string(" m (no standard error; ")) +
+         "what the means and covariances determine); " +
          (std::isfinite(sigma) ? "sigma from the excess kurtosis of the along-track errors on "
                                  "the straight lines (a moment estimate, no standard error)"
                                : "sigma undetermined (no straight line with heavy tails), "

@@ -20,6 +20,22 @@ bool cholesky(const Matrix3& sigma, Eigen::LLT<Matrix3>& llt) {
   return llt.info() == Eigen::Success && sigma.allFinite();
 }
 
+/// The Cholesky of a predicted covariance that a test can be taken against: positive definite,
+/// and, scaled to unit diagonal, no pivot below kMinCorrelationPivot. Two components whose
+/// correlation is 1 (a straight line with one wheel noise-free ties the heading to the travel)
+/// make the covariance singular, but rounding leaves it barely positive definite, and a test
+/// against that would call any spread inconsistent (a NEES of 1e11): untestable instead.
+constexpr double kMinCorrelationPivot = 1e-12;
+bool cholesky_of_prediction(const Matrix3& sigma, Eigen::LLT<Matrix3>& llt) {
+  if (!cholesky(sigma, llt)) return false;
+  const Matrix3 L = llt.matrixL();
+  for (int i = 0; i < kDim; ++i) {
+    const double pivot = L(i, i) / std::sqrt(sigma(i, i));  // the unit-diagonal matrix's Cholesky
+    if (!(pivot * pivot >= kMinCorrelationPivot)) return false;
+  }
+  return true;
+}
+
 TestResult invalid(int dof) {
   TestResult r;
   r.statistic = std::numeric_limits<double>::quiet_NaN();
@@ -202,7 +218,7 @@ double chi2_sf(double x, double dof) {
 TestResult mean_test_known_covariance(const SampleMoments& s, const Vector3& mu0,
                                       const Matrix3& sigma0) {
   Eigen::LLT<Matrix3> llt;
-  if (s.n < 1 || !cholesky(sigma0, llt) || !s.mean.allFinite() || !mu0.allFinite()) return invalid(kDim);
+  if (s.n < 1 || !cholesky_of_prediction(sigma0, llt) || !s.mean.allFinite() || !mu0.allFinite()) return invalid(kDim);
   const Vector3 d = s.mean - mu0;
   TestResult r;
   r.dof = kDim;
@@ -230,7 +246,7 @@ TestResult hotelling_test(const SampleMoments& s, const Vector3& mu0) {
 TestResult covariance_test(const SampleMoments& s, const Matrix3& sigma0) {
   constexpr int kDof = kDim * (kDim + 1) / 2;
   Eigen::LLT<Matrix3> llt;
-  if (s.n <= kDim || !cholesky(sigma0, llt) || !s.cov.allFinite()) return invalid(kDof);
+  if (s.n <= kDim || !cholesky_of_prediction(sigma0, llt) || !s.cov.allFinite()) return invalid(kDof);
   const Matrix3 m = llt.solve(s.cov);  // Sigma0^-1 S: same trace and determinant as S Sigma0^-1
   const double det = m.determinant();
   if (!(det > 0.0)) {
@@ -271,7 +287,7 @@ TestResult covariance_test_adf(const SampleMoments& s, const Matrix3& sigma0) {
 
 double nees_mean(const SampleMoments& s, const Vector3& mu, const Matrix3& sigma) {
   Eigen::LLT<Matrix3> llt;
-  if (s.n < 1 || !cholesky(sigma, llt)) return std::numeric_limits<double>::quiet_NaN();
+  if (s.n < 1 || !cholesky_of_prediction(sigma, llt)) return std::numeric_limits<double>::quiet_NaN();
   const double n = static_cast<double>(s.n);
   const Vector3 d = s.mean - mu;
   const Matrix3 second = s.cov * ((n - 1.0) / n) + d * d.transpose();

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <nlopt.hpp>
 #include <optional>
 #include <utility>
@@ -105,6 +106,26 @@ using Residuals = std::vector<std::vector<RunResidual>>;
 /// Each run's term of the log-likelihood at the coordinates u.
 using Terms = std::function<std::vector<double>(const std::vector<double>& u)>;
 
+/// `terms` with a model that cannot be computed at u (a custom expression out of its range, order
+/// 2 beyond its piece limit as an effect cuts the pieces: an InputError) taken as a wall, every
+/// run's term -inf, once a point has been computed (which gives the run count); at the first
+/// point the error stands (the start must be computable). The exact path's optimiser already
+/// took walls; its last evaluation and the difference points of its information now do too,
+/// where a parameter's optimum lies beside one (those standard errors come out NaN).
+Terms wall_aware(Terms terms) {
+  auto runs = std::make_shared<std::size_t>(0);
+  return [terms = std::move(terms), runs](const std::vector<double>& u) {
+    try {
+      std::vector<double> t = terms(u);
+      *runs = t.size();
+      return t;
+    } catch (const InputError&) {
+      if (*runs == 0) throw;
+      return std::vector<double>(*runs, -std::numeric_limits<double>::infinity());
+    }
+  };
+}
+
 /// -log L from the runs' terms; 1e300 where it is not finite (a wall for the optimiser).
 double negative_sum(const std::vector<double>& terms) {
   double ll = 0.0;
@@ -133,6 +154,12 @@ Box box_of(const std::vector<Handle>& handles) {
 double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int* evaluations,
                 double ftol_abs = 1e-9) {
   if (u.empty()) return negative_sum(terms(u));
+  // NLopt refuses a start outside the box, and BOBYQA can return a point an ulp beyond a bound
+  // (a square root's upper bound), which the next call would start from.
+  const auto into_box = [&] {
+    for (std::size_t i = 0; i < u.size(); ++i) u[i] = std::clamp(u[i], box.lower[i], box.upper[i]);
+  };
+  into_box();
   struct Context {
     const Terms* terms;
     int* evaluations;
@@ -163,6 +190,7 @@ double minimise(const Terms& terms, std::vector<double>& u, const Box& box, int*
   } catch (const nlopt::roundoff_limited&) {
     // converged as far as rounding allows; u holds the best point
   }
+  into_box();
   return negative_sum(terms(u));
 }
 
@@ -333,11 +361,11 @@ using Evaluate = std::function<Residuals(const SuiteModel&)>;
 
 FitResult fit_exact(const Evaluate& evaluate, SuiteModel model, const std::vector<Handle>& handles,
                     Likelihood kind, std::atomic<std::int64_t>* counter, FitResult out) {
-  const Terms terms = [&](const std::vector<double>& u) {
+  const Terms terms = wall_aware([&](const std::vector<double>& u) {
     if (counter) ++*counter;
     apply(model, handles, u.data());
     return run_log_likelihoods(evaluate(model), kind == Likelihood::scatter);
-  };
+  });
   const Box box = box_of(handles);
   std::vector<double> u = start_coordinates(model, handles);
   const double best = minimise(terms, u, box, &out.evaluations);
@@ -885,11 +913,11 @@ FitResult refit_exactly(const FitResult& fast, const std::vector<std::string>& o
   SuiteModel model = fast.model;
   std::vector<Handle> handles;
   for (const std::string& name : own) handles.push_back(make_handle(name, model));
-  const Terms terms = [&](const std::vector<double>& u) {
+  const Terms terms = wall_aware([&](const std::vector<double>& u) {
     if (evaluations) ++*evaluations;
     apply(model, handles, u.data());
     return run_log_likelihoods(cache.evaluate(model), scatter);
-  };
+  });
   std::vector<double> u = start_coordinates(model, handles);
   const double best = -minimise(terms, u, box_of(handles), nullptr, 0.1 * kFitTolerance);
   apply(model, handles, u.data());
@@ -1015,8 +1043,10 @@ UmbmarkResult umbmark(const Suite& suite, const std::string& cw, const std::stri
   const double x_cw = r.cg_cw.x(), y_cw = r.cg_cw.y(), x_ccw = r.cg_ccw.x(), y_ccw = r.cg_ccw.y();
   r.alpha = 0.5 * ((x_cw + x_ccw) / (-4 * L) + (y_cw - y_ccw) / (-4 * L));  // [Chong97] eq. (6)
   r.beta = 0.5 * ((x_cw - x_ccw) / (-4 * L) + (y_cw + y_ccw) / (-4 * L));   // eq. (7)
-  const double R = (L / 2) / std::sin(r.beta / 2);                           // eq. (8)
-  r.Ed = (R + b / 2) / (R - b / 2);                                           // eq. (9)
+  // Eq. (9) with R = (L/2)/sin(beta/2) (eq. 8) divided through by R, so that beta = 0 (no
+  // curvature: R infinite) gives Ed = 1 instead of inf/inf.
+  const double q = (b / L) * std::sin(r.beta / 2);                            // (b/2)/R
+  r.Ed = (1 + q) / (1 - q);                                                   // eq. (9)
   r.Eb = (M_PI / 2) / (M_PI / 2 - r.alpha);                                   // eq. (10)
   r.c_left = 2 / (r.Ed + 1);                                                  // eq. (11)
   r.c_right = 2 / (1 / r.Ed + 1);

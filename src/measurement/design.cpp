@@ -56,13 +56,36 @@ Sensitivities sensitivities(const Suite& suite, const SuiteModel& model, const s
   Sensitivities s;
   s.at = residuals(suite, model);
   for (const std::string& name : names) {
-    const Step step = step_of(model, name);
+    Step step = step_of(model, name);
     SuiteModel m = model;
     const double v = fitted_parameter(m, name);
-    fitted_parameter(m, name) = v + step.h;
-    s.plus.push_back(residuals(suite, m));
-    fitted_parameter(m, name) = step.central ? v - step.h : v;
-    s.minus.push_back(step.central ? residuals(suite, m) : s.at);
+    // The residuals at v + o, or nothing where the model cannot be computed there (a custom
+    // expression's wall beside a parameter that sits at it, e.g. a noise factor a at 0).
+    auto moved = [&](double o) -> std::optional<Residuals> {
+      fitted_parameter(m, name) = v + o;
+      try {
+        return residuals(suite, m);
+      } catch (const InputError&) {
+        return std::nullopt;
+      }
+    };
+    std::optional<Residuals> plus = moved(step.h);
+    std::optional<Residuals> minus = step.central ? moved(-step.h) : std::nullopt;
+    if (plus && minus) {  // central
+      s.plus.push_back(std::move(*plus));
+      s.minus.push_back(std::move(*minus));
+    } else if (plus) {  // forward: v - h is out of range or walled
+      step.central = false;
+      s.plus.push_back(std::move(*plus));
+      s.minus.push_back(s.at);
+    } else if (minus) {  // backward: v + h is walled
+      step.central = false;
+      s.plus.push_back(s.at);
+      s.minus.push_back(std::move(*minus));
+    } else {  // walled on both sides: the error of v + h
+      fitted_parameter(m, name) = v + step.h;
+      s.plus.push_back(residuals(suite, m));
+    }
     s.steps.push_back(step);
   }
   return s;
@@ -318,6 +341,17 @@ std::vector<Recipe> recipes() {
     out.push_back(square);
   }
   return out;
+}
+
+/// Half the log-determinant of an information matrix (plus its ridge): from its LDLT pivots;
+/// where rounding has left a pivot at or below 0 (parameters the runs do not determine, whose
+/// information cancels to within rounding), from its eigenvalues, each at least the ridge's
+/// smallest diagonal, so that a gain is a number and not NaN.
+double half_log_det(const Eigen::MatrixXd& m, const Eigen::MatrixXd& ridge) {
+  const Eigen::VectorXd d = Eigen::LDLT<Eigen::MatrixXd>(m).vectorD();
+  if (d.size() == 0 || d.minCoeff() > 0.0) return 0.5 * d.array().log().sum();
+  const Eigen::VectorXd lambda = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(m, Eigen::EigenvaluesOnly).eigenvalues();
+  return 0.5 * lambda.cwiseMax(ridge.diagonal().minCoeff()).array().log().sum();
 }
 
 }  // namespace
@@ -576,12 +610,13 @@ std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult
   }
   // A relative ridge of 1e-9 keeps a parameter that the suite does not determine at all finite.
   const Eigen::MatrixXd ridge = (1e-9 * scale.cwiseMax(1e-300)).asDiagonal();
-  const double base = 0.5 * Eigen::LDLT<Eigen::MatrixXd>(now + ridge).vectorD().array().log().sum();
+  const double base = half_log_det(now + ridge, ridge);
   std::vector<NextExperiment> out;
   for (std::size_t e = 0; e < menu.size(); ++e) {
     const Eigen::MatrixXd after = now + adds[e] + ridge;
     const Eigen::LDLT<Eigen::MatrixXd> ldlt(after);
-    NextExperiment next{menu[e], 0.5 * ldlt.vectorD().array().log().sum() - base, {}};
+    NextExperiment next{menu[e], half_log_det(after, ridge), {}};
+    next.information_gain -= base;
     const Eigen::MatrixXd cov = ldlt.solve(Eigen::MatrixXd::Identity(after.rows(), after.cols()));
     for (std::size_t k = 0; k < fit.names.size(); ++k) {
       next.expected_stderr.push_back({fit.names[k], std::sqrt(cov(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k)))});

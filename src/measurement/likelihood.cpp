@@ -31,7 +31,8 @@ constexpr int kDim = 3;
 /// variance and is uncorrelated with z, and the runs of a group share it as they share z. From
 /// the three points value and value +- h, h = sqrt(3) sd (Gauss-Hermite: the column is then
 /// E[f z] and the shift E[f] - f exactly for polynomials of degree 3 and 5), h kept within half
-/// the distance to the parameter's bounds. f at the value is `mean`: a logged run passes its
+/// the distance to the parameter's bounds (at a bound, none: no terms). f at the value is
+/// `mean`: a logged run passes its
 /// prediction's (on fine pieces predict_with_order's mean is predict_mean's bit for bit; on
 /// pieces it cannot coarsen, the order-2 model's, the same up to rounding, ~1e-16 relative),
 /// and its odometry end pose, which the shifted parameter does not change. Two mean-only
@@ -48,6 +49,9 @@ GroupTerms group_terms(const std::vector<ArcSegment>& pieces, const std::vector<
   const double value = effects[target.effect].values[target.parameter];
   const EffectParameterInfo& p = info_of(effects[target.effect])->parameters[target.parameter];
   const double h = std::min({std::sqrt(3.0) * target.sd, 0.5 * (value - p.lower), 0.5 * (p.upper - value)});
+  // A value on a bound of its range (backlash at 0) cannot vary to either side: no terms, as
+  // with sd = 0, rather than differences over a zero step.
+  if (!(h > 0.0)) return {};
   std::vector<EffectList> shifted(2, effects);
   shifted[0][target.effect].values[target.parameter] = value + h;
   shifted[1][target.effect].values[target.parameter] = value - h;
