@@ -65,6 +65,23 @@ TEST(Compare, PlainWorldIsConsistentAndHiddenEffectsAreNamed) {
   EXPECT_EQ(compare(lab, informed, kAlpha).verdict, "consistent");
 }
 
+/// The standard lab's 8 m line (configs/worlds/standard.yaml: its robot and measurement noise)
+/// as an in-memory suite of `runs` runs, each measured at `end`.
+Suite line_8m_suite(int runs, const Vector3& end) {
+  const WorldFile w = load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml");
+  Suite s;
+  s.file = "in-memory";
+  s.name = "line-8m";
+  s.robot = w.robot;
+  s.measurement_noise = w.measurement_noise;
+  SuiteExperiment ex;
+  ex.name = w.experiments.at(1).name;
+  ex.path = w.experiments.at(1).path;
+  for (int r = 0; r < runs; ++r) ex.runs.push_back({std::to_string(r + 1), end, {}, {}});
+  s.experiments.push_back(ex);
+  return s;
+}
+
 TEST(Compare, AMeanTestFailingOnACombinationNamesThePairNotOneAxis) {
   // An 8 m line, whose predicted y and theta errors are strongly correlated. 30 runs built so
   // that their sample covariance is the predicted one exactly and their mean is off by 2.5
@@ -72,19 +89,9 @@ TEST(Compare, AMeanTestFailingOnACombinationNamesThePairNotOneAxis) {
   // component alone is within its test's level (Student t, 29 dof: p = 0.018 against
   // alpha_per_test), the two together are far off, and Hotelling's test fails. The failure
   // names the pair, with the joint statistic sqrt(d' C^-1 d) computed here independently.
-  const WorldFile w = load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml");
-  Suite s;
-  s.file = "in-memory";
-  s.name = "joint";
-  s.robot = w.robot;
-  s.measurement_noise = w.measurement_noise;
-  SuiteExperiment ex;
-  ex.name = "line-8m";
-  ex.path = w.experiments.at(1).path;
-  ASSERT_EQ(w.experiments.at(1).name, "line-8m");
   constexpr int kCopies = 5, kRuns = 6 * kCopies;
-  for (int r = 0; r < kRuns; ++r) ex.runs.push_back({std::to_string(r + 1), Vector3::Zero(), {}, {}});
-  s.experiments.push_back(ex);
+  Suite s = line_8m_suite(kRuns, Vector3::Zero());
+  ASSERT_EQ(s.experiments.at(0).name, "line-8m");
   const ExperimentComparison zero = compare(s, suite_model(s), 0.01).experiments.at(0);
   const Matrix3 P = zero.predicted_cov;
   const Vector3 odometry = -zero.errors.at(0);  // error = measured - odometry (no wrap near 0)
@@ -119,17 +126,7 @@ TEST(Compare, RunsThatAreAllAlikeHaveNoKurtosisAndAreInconsistent) {
   // 30 runs with the same end pose (a copied row, a deterministic simulator): their residuals
   // have no spread, so no kurtosis; compare used to end in a NaN inside Mardia's test (an
   // internal error). Now the kurtosis test is absent, and the covariance test rejects.
-  const WorldFile w = load_world(ODOMCOV_SOURCE_DIR "/configs/worlds/standard.yaml");
-  Suite s;
-  s.file = "in-memory";
-  s.name = "alike";
-  s.robot = w.robot;
-  s.measurement_noise = w.measurement_noise;
-  SuiteExperiment ex;
-  ex.name = "line-8m";
-  ex.path = w.experiments.at(1).path;
-  for (int r = 0; r < 30; ++r) ex.runs.push_back({std::to_string(r + 1), Vector3(8.001, 0.002, 1e-4), {}, {}});
-  s.experiments.push_back(ex);
+  const Suite s = line_8m_suite(30, Vector3(8.001, 0.002, 1e-4));
   Comparison c;
   ASSERT_NO_THROW(c = compare(s, suite_model(s), 0.01));
   EXPECT_FALSE(c.kurtosis.valid);
