@@ -488,19 +488,25 @@ double tails_scale(const Round& round, const Trial& t) {
   return counted == 0 ? 1.0 : std::max(1.0, sum / static_cast<double>(counted));
 }
 
+/// A candidate of `type` before any judgement: its name, physics and kind.
+Candidate unjudged(const CandidateType& type) {
+  Candidate c;
+  c.effect = type.name;
+  c.physics = type.physics;
+  c.signature = type.signature;
+  c.robot = type.robot;
+  c.systematic = type.systematic;
+  return c;
+}
+
 /// Judges a fitted candidate in-sample: delta log-likelihood on its part of the likelihood,
 /// delta BIC, p-value, the gain in the mean (systematic, not grouped), its reported parameters
 /// and where it showed most.
 void judge_in_sample(const Round& round, Trial& t, double log_runs) {
   const CandidateType& type = *t.type;
   const bool exact = t.c.exact;
-  t.c = Candidate{};
+  t.c = unjudged(type);
   Candidate& c = t.c;
-  c.effect = type.name;
-  c.physics = type.physics;
-  c.signature = type.signature;
-  c.robot = type.robot;
-  c.systematic = type.systematic;
   c.exact = exact;
   // With heavy tails the observed information understates the uncertainty: sandwich SEs.
   const Eigen::VectorXd& se = round.heavy_tails ? t.fit.robust_stderrs : t.fit.stderrs;
@@ -532,10 +538,10 @@ void judge_in_sample(const Round& round, Trial& t, double log_runs) {
   confounding(t.fit, t.fitted.size() - type.fitted.size(), c);
 }
 
-/// Significance at alpha shared among the candidates (Bonferroni), then significant
-/// candidates first, each group by delta BIC.
-void rank_trials(std::vector<Trial>& trials, double alpha) {
-  const double per_candidate = alpha / static_cast<double>(std::max<std::size_t>(1, trials.size()));
+/// Significance at alpha shared among the `family` candidates considered (Bonferroni), then
+/// significant candidates first, each group by delta BIC.
+void rank_trials(std::vector<Trial>& trials, double alpha, std::size_t family) {
+  const double per_candidate = alpha / static_cast<double>(std::max<std::size_t>(1, family));
   for (Trial& t : trials) {
     t.c.significant = t.c.p_value < per_candidate;
     t.c.verdict = t.c.significant ? "not judged" : "not significant";
@@ -1372,16 +1378,30 @@ void explain_outcome(Diagnosis& d, const Suite& suite, const SuiteModel& model, 
 /// candidate (whose expressions may be arbitrarily nonlinear), is refitted exactly
 /// (refit_exactly) and judged again, and the candidates are ranked again. (The catalogue's
 /// candidates agree with the exact path where the fast one is verified: fast_path_test.)
-std::vector<Trial> fit_trials(Round& round, const std::vector<CandidateType>& types, std::size_t runs, double alpha) {
+/// `uncomputable` receives the candidates whose model cannot be computed on these runs at all
+/// (order 2's piece limit, met as the candidate cuts the pieces: an InputError keyed "order 2"),
+/// each not judged, with the reason; the others are fitted and judged.
+std::vector<Trial> fit_trials(Round& round, const std::vector<CandidateType>& types, std::size_t runs, double alpha,
+                              std::vector<Candidate>& uncomputable) {
   const double log_runs = std::log(static_cast<double>(runs));
   std::vector<Trial> trials;
   for (const CandidateType& type : types) {
     round.check_cancel();
-    trials.push_back(fit_trial(round, type));
+    try {
+      trials.push_back(fit_trial(round, type));
+    } catch (const InputError& e) {
+      if (e.key() != "order 2") throw;
+      Candidate& c = uncomputable.emplace_back(unjudged(type));
+      c.model = round.base;
+      stop(c, "not judged", "uncomputable",
+           "not judged: its model cannot be computed on these runs at order 2 (" + e.message() + ")");
+      if (round.progress) ++round.progress->fits_done;
+      continue;
+    }
     judge_in_sample(round, trials.back(), log_runs);
     if (round.progress) ++round.progress->fits_done;
   }
-  rank_trials(trials, alpha);
+  rank_trials(trials, alpha, types.size());
   bool refitted = false;
   for (Trial& t : trials) {
     if (t.fit.verified || !(t.c.significant || !t.type->start.empty())) continue;
@@ -1394,7 +1414,7 @@ std::vector<Trial> fit_trials(Round& round, const std::vector<CandidateType>& ty
     judge_in_sample(round, t, log_runs);
     refitted = true;
   }
-  if (refitted) rank_trials(trials, alpha);
+  if (refitted) rank_trials(trials, alpha, types.size());
   // A heavy-tailed candidate's impulse size, which its completion sized from the straight lines
   // alone, is matched to the tails of every experiment before any rule looks at the shape of
   // its model's errors (the consistency and tails rules); its likelihood does not change.
@@ -1470,8 +1490,11 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   // The fits: the base refit, one per candidate and the winner's refit (and, as they come, the
   // finalists' folds).
   if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
-  std::vector<Trial> trials = fit_trials(round, types, d.runs, options.alpha);
-  const double per_candidate = options.alpha / static_cast<double>(std::max<std::size_t>(1, trials.size()));
+  std::vector<Candidate> uncomputable;
+  std::vector<Trial> trials = fit_trials(round, types, d.runs, options.alpha, uncomputable);
+  // Every candidate considered counts in the family, the uncomputable ones too.
+  const double per_candidate =
+      options.alpha / static_cast<double>(std::max<std::size_t>(1, trials.size() + uncomputable.size()));
   plan_full_model(round, trials, per_candidate);
   for (std::size_t i = 0; i < trials.size() && trials[i].c.significant && !d.best; ++i) {
     if (judge(round, trials[i], per_candidate, d.before, d.runs)) d.best = i;
@@ -1480,6 +1503,7 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   if (d.best) d.best = prefer_consistent_rival(round, trials, *d.best, per_candidate, d.before, d.runs, options.calibration);
   if (d.best) d.best = prefer_by_tails(round, trials, *d.best, per_candidate, d.before, d.runs, options.calibration);
   for (Trial& t : trials) d.candidates.push_back(std::move(t.c));
+  for (Candidate& c : uncomputable) d.candidates.push_back(std::move(c));
   if (progress) progress->fits_done = progress->fits_total.load();
   explain_outcome(d, suite, model, cache, options.calibration);
   return d;
