@@ -319,7 +319,7 @@ CalibrateInputs prepare_calibrate(const CalibrateCliOptions& opt) {
 
 void setup_calibrate(CLI::App& app, int& exit_code) {
   auto opt = std::make_shared<CalibrateCliOptions>();
-  add_calibrate_options(app, *opt)->callback([opt, &exit_code] { exit_code = naming_suite(opt->suite, [&] { return run_calibrate(*opt); }); });
+  add_calibrate_options(app, *opt)->callback([opt, &exit_code] { exit_code = run_calibrate(*opt); });
 }
 
 }  // namespace odomcov::cli

@@ -174,7 +174,7 @@ void setup_compare(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   add_referee_options(cmd, opt->referee);
   cmd->add_option("--json", opt->json, "Write the results as JSON to this file");
-  cmd->callback([opt, &exit_code] { exit_code = naming_suite(opt->suite, [&] { return run_compare(*opt); }); });
+  cmd->callback([opt, &exit_code] { exit_code = run_compare(*opt); });
 }
 
 }  // namespace odomcov::cli

@@ -220,7 +220,7 @@ void setup_diagnose(CLI::App& app, int& exit_code) {
   cmd->add_flag("--exact", opt->exact,
                 "Propagate every run at every likelihood evaluation (slow; the reference for the "
                 "default linearised, re-anchored fit)");
-  cmd->callback([opt, &exit_code] { exit_code = naming_suite(opt->suite, [&] { return run_diagnose(*opt); }); });
+  cmd->callback([opt, &exit_code] { exit_code = run_diagnose(*opt); });
 }
 
 }  // namespace odomcov::cli

@@ -6,7 +6,6 @@
 
 #include <string>
 
-#include "odomcov/base/error.hpp"
 #include "odomcov/closed_form/closed_form.hpp"
 #include "odomcov/engine/statistics.hpp"
 #include "odomcov/measurement/suite.hpp"
@@ -66,19 +65,6 @@ void check_threads(int threads);
 void check_second_order_size(const Suite& suite, int order);
 
 void check_finite_start(const Suite& suite, const SuiteModel& model, const std::string& what);
-
-/// Runs a command on the suite `file`: an InputError the library raised without a file (order
-/// 2's piece limit met by a candidate's model, a custom expression out of range on the runs) is
-/// raised again naming the suite, so its one line says which input it is about.
-template <class Run>
-int naming_suite(const std::string& file, Run&& run) {
-  try {
-    return run();
-  } catch (const InputError& e) {
-    if (!e.file().empty()) throw;
-    throw InputError(file, e.line(), e.key(), e.message());
-  }
-}
 
 /// CLI11 check for unsigned options (seeds): digits only, so "-1" is refused instead of
 /// wrapping to 2^64 - 1, and the value must fit 64 bits.

@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "odomcov/base/error.hpp"
 #include "odomcov/closed_form/limits.hpp"
 #include "odomcov/engine/propagation.hpp"
 #include "odomcov/engine/second_order.hpp"
@@ -118,6 +119,26 @@ void predict_logged_run(const SuiteRun& run, const SuiteModel& model, const Grou
          g.column, group, g.column2, p.noise_mean};
 }
 
+/// One unit of residuals' work: run r of experiment ex (logged, or of a path predicted from the
+/// run's start heading: `per_run`), or every run of a planned path. The engine's errors know no
+/// file (order 2's piece limit, met as the model's effects cut the pieces): one is raised again
+/// naming the suite and the experiment it is about.
+void predict_unit(const Suite& suite, const SuiteExperiment& ex, const SuiteModel& model, const GroupTarget& target,
+                  const Matrix3& meas, int group, bool per_run, std::size_t r, const CoarsePieces* coarse,
+                  std::optional<PredictionParts>* kept, std::vector<RunResidual>& out) {
+  try {
+    if (!ex.logged) {
+      const std::size_t count = per_run ? 1 : ex.runs.size();
+      predict_path_runs(ex, model, target, meas, group, per_run ? ex.runs[r].heading0_rad : 0.0, r, count, out, kept);
+      return;
+    }
+    predict_logged_run(ex.runs[r], model, target, meas, group, coarse, kept, out[r]);
+  } catch (const InputError& e) {
+    if (!e.file().empty()) throw;
+    throw InputError(suite.file, 0, e.key(), ex.name + ": " + e.message());
+  }
+}
+
 }  // namespace
 
 std::string second_order_problem(const Suite& suite, int order) {
@@ -201,14 +222,8 @@ std::vector<std::vector<RunResidual>> residuals(const Suite& suite, const SuiteM
     const SuiteExperiment& ex = suite.experiments[e];
     const int group = group_of[e];
     std::optional<PredictionParts>* kept = predictions != nullptr ? &(*predictions)[e][r] : nullptr;
-    if (!ex.logged) {
-      const std::size_t count = per_run ? 1 : ex.runs.size();
-      predict_path_runs(ex, model, target, meas, group, per_run ? ex.runs[r].heading0_rad : 0.0, r, count, out[e],
-                        kept);
-      return;
-    }
-    predict_logged_run(ex.runs[r], model, target, meas, group, coarse != nullptr ? &(*coarse)[e][r] : nullptr, kept,
-                       out[e][r]);
+    predict_unit(suite, ex, model, target, meas, group, per_run, r, coarse != nullptr ? &(*coarse)[e][r] : nullptr,
+                 kept, out[e]);
   }, tbb::simple_partitioner());
   return out;
 }
