@@ -1492,9 +1492,8 @@ Diagnosis diagnose(const Suite& suite, const SuiteModel& model, const DiagnoseOp
   if (progress) progress->fits_total = static_cast<std::int64_t>(types.size()) + 2;
   std::vector<Candidate> uncomputable;
   std::vector<Trial> trials = fit_trials(round, types, d.runs, options.alpha, uncomputable);
-  // Every candidate considered counts in the family, the uncomputable ones too.
-  const double per_candidate =
-      options.alpha / static_cast<double>(std::max<std::size_t>(1, trials.size() + uncomputable.size()));
+  // Every candidate considered counts in the family, the uncomputable ones too (as in rank_trials).
+  const double per_candidate = options.alpha / static_cast<double>(std::max<std::size_t>(1, types.size()));
   plan_full_model(round, trials, per_candidate);
   for (std::size_t i = 0; i < trials.size() && trials[i].c.significant && !d.best; ++i) {
     if (judge(round, trials[i], per_candidate, d.before, d.runs)) d.best = i;
