@@ -927,6 +927,21 @@ std::string facing_start_world(const std::string& world_effects, const std::stri
          "experiments:\n" + experiments;
 }
 
+TEST(Design, AMenuItemWhoseGainIsNotANumberIsLeftOutAndNamed) {
+  // A per-run radius fitted to random end poses (tests/data/suites/order2_by_candidate.yaml)
+  // comes out at an absurd size (sigma ~7), where the model's information is not finite. The
+  // menu printed "gain -nan nats" in an order NaN cannot give; now every ranked gain is a
+  // number, and the items whose gain is not are named, with why.
+  const Suite suite = load_suite(ODOMCOV_SOURCE_DIR "/tests/data/suites/order2_by_candidate.yaml");
+  const FitResult f = fit(suite, suite_model(suite), {"per_run_radius.sigma"});
+  std::vector<UnpredictableExperiment> left_out;
+  const std::vector<NextExperiment> next = next_experiments(suite, f, &left_out);
+  for (const NextExperiment& n : next) EXPECT_TRUE(std::isfinite(n.information_gain)) << n.experiment.name;
+  EXPECT_TRUE(std::any_of(left_out.begin(), left_out.end(), [](const UnpredictableExperiment& u) {
+    return u.why.find("information gain is not a number") != std::string::npos;
+  }));
+}
+
 TEST(Design, APredictionCarriesWhatItsTrainingCouldNotSize) {
   // The predictive check judged the way a prediction is: over worlds drawn from its prior. Each
   // of M worlds has a reference offset (dx, dy) from the catalogue's prior N(0, 10 mm) (a

@@ -623,8 +623,16 @@ std::vector<NextExperiment> next_experiments(const Suite& suite, const FitResult
     }
     out.push_back(std::move(next));
   }
-  std::vector<std::size_t> order(out.size());
-  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  // An item whose gain is not a number (the model's information there is not finite: a fit at
+  // an absurd size) cannot be ranked: it leaves the menu, named with why.
+  std::vector<std::size_t> order;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    if (std::isfinite(out[i].information_gain)) {
+      order.push_back(i);
+    } else if (unpredictable) {
+      unpredictable->push_back({menu[i].name, "its information gain is not a number (the model's information is not finite there)"});
+    }
+  }
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return out[a].information_gain > out[b].information_gain; });
   std::vector<NextExperiment> ranked;
   std::vector<std::size_t> kept;
